@@ -1,0 +1,24 @@
+"""intuitf: transfer functions for direct volume rendering, designed from what a person wants.
+
+Public API (everything else may change):
+``Volume``, ``load_volume``, ``phantom`` (volumes); ``Gaussian``, ``GaussianTF`` (transfer
+functions); ``Camera``, ``VolumeRenderer``, ``SampleCache`` (rendering); judges, the tournament
+and the Explorer live in their packages and are re-exported here as they land.
+"""
+
+from intuitf.errors import IntuitfError
+from intuitf.tf import Gaussian, GaussianTF, default_tf, load_tf, save_tf
+from intuitf.volume import Volume
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Gaussian",
+    "GaussianTF",
+    "IntuitfError",
+    "Volume",
+    "__version__",
+    "default_tf",
+    "load_tf",
+    "save_tf",
+]

@@ -1,0 +1,3 @@
+from intuitf.cli.app import main
+
+main()

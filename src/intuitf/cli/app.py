@@ -1,0 +1,58 @@
+"""The ``intuitf`` command. Each sub-command lives in its own module with a ``register(app)``.
+
+Errors a user can cause are printed as one clear message, never as a traceback.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+import typer
+from rich.console import Console
+
+from intuitf.errors import IntuitfError
+
+app = typer.Typer(
+    name="intuitf",
+    help="Design transfer functions for direct volume rendering from what you want.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+#: Modules under intuitf.cli that contribute commands (each has ``register(app)``).
+COMMAND_MODULES = [
+    "intuitf.cli.volume_cmds",
+]
+
+for _name in COMMAND_MODULES:
+    importlib.import_module(_name).register(app)
+
+err_console = Console(stderr=True)
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point: run the app and turn user errors into a message and exit code 2."""
+    try:
+        app(args=argv, standalone_mode=False)
+    except IntuitfError as exc:
+        err_console.print(f"[bold red]error:[/] {exc.message}", highlight=False)
+        if exc.hint:
+            err_console.print(f"[yellow]what to do:[/] {exc.hint}", highlight=False)
+        sys.exit(2)
+    except KeyboardInterrupt:
+        err_console.print("[yellow]Interrupted.[/] Everything finished so far was kept.")
+        sys.exit(130)
+    except SystemExit:
+        raise
+    except Exception as exc:  # click's usage errors and the like
+        import click
+
+        if isinstance(exc, click.exceptions.ClickException):
+            exc.show()
+            sys.exit(exc.exit_code)
+        if isinstance(exc, click.exceptions.Abort):
+            err_console.print("[yellow]Aborted.[/]")
+            sys.exit(130)
+        raise

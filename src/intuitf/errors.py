@@ -1,0 +1,45 @@
+"""Errors a user can cause, each with a message that says what happened and what to do.
+
+The command line catches :class:`IntuitfError` and prints its message without a traceback.
+"""
+
+from __future__ import annotations
+
+
+class IntuitfError(Exception):
+    """Base class for errors caused by input, configuration or the environment.
+
+    ``hint`` tells the user what to do about it.
+    """
+
+    def __init__(self, message: str, hint: str | None = None) -> None:
+        super().__init__(message)
+        self.message = message
+        self.hint = hint
+
+    def __str__(self) -> str:
+        return self.message if not self.hint else f"{self.message}\n  What to do: {self.hint}"
+
+
+class VolumeError(IntuitfError):
+    """A volume could not be read or is unusable."""
+
+
+class TransferFunctionError(IntuitfError):
+    """A transfer function is invalid or could not be read."""
+
+
+class RenderError(IntuitfError):
+    """Rendering parameters are invalid."""
+
+
+class JudgeError(IntuitfError):
+    """A judge is misconfigured or its server cannot be used."""
+
+
+class BudgetExhausted(IntuitfError):
+    """The call or money budget is spent; everything paid for so far is kept."""
+
+
+class SessionError(IntuitfError):
+    """A run directory is missing, corrupt or cannot be written."""

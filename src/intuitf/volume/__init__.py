@@ -1,0 +1,5 @@
+"""Volumes: the :class:`Volume` type, readers for common formats, and a procedural phantom."""
+
+from intuitf.volume.volume import Volume
+
+__all__ = ["Volume"]
