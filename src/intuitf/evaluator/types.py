@@ -1,0 +1,195 @@
+"""The vocabulary of judging: aspects, intents, choices, costs, verdicts and the Judge protocol.
+
+A Judge compares two renderings (uint8 RGB arrays, shape (H, W, 3)) under a set of aspects and
+the user's intent, and returns a :class:`Verdict`. Judges never see transfer functions.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Literal, Protocol, runtime_checkable
+
+import numpy as np
+
+
+class Choice(str, Enum):
+    """Which of two images is better on an aspect (or overall)."""
+
+    FIRST = "first"
+    SECOND = "second"
+    TIE = "tie"
+
+    @property
+    def score(self) -> float:
+        """Score of the first image: 1 for a win, 0.5 for a tie, 0 for a loss."""
+        return {Choice.FIRST: 1.0, Choice.SECOND: 0.0, Choice.TIE: 0.5}[self]
+
+    def swapped(self) -> Choice:
+        """The same choice seen with the two images in the other order."""
+        return {Choice.FIRST: Choice.SECOND, Choice.SECOND: Choice.FIRST, Choice.TIE: Choice.TIE}[self]
+
+
+@dataclass(frozen=True)
+class Aspect:
+    """A named criterion the judge compares on, with its weight in the overall preference."""
+
+    key: str
+    name: str
+    description: str
+    weight: float = 1.0
+
+
+IntentKind = Literal["none", "text", "image", "sketch", "edit"]
+
+
+@dataclass(eq=False)
+class Intent:
+    """What the user wants.
+
+    - ``text``: a description ("opaque ivory bone, faint red skin").
+    - ``image``: ``reference`` is a picture (uint8 RGB) whose style to match.
+    - ``sketch``: ``sketch`` is an RGBA stroke layer (alpha > 0 where drawn) over ``base``,
+      the rendering the strokes were drawn on; a stroke means "make this region this colour".
+    - ``edit``: ``instruction`` applies to the features ``selected`` (Gaussian indices) of
+      ``base``, the rendering before the edit; everything else should be preserved.
+    ``about`` says what the volume is ("a CT of a human foot"), for any kind.
+    """
+
+    kind: IntentKind = "none"
+    text: str | None = None
+    reference: np.ndarray | None = None
+    sketch: np.ndarray | None = None
+    base: np.ndarray | None = None
+    selected: tuple[int, ...] = ()
+    about: str | None = None
+
+    def fingerprint(self) -> str:
+        """A stable hash of the intent's content (for verdict caching)."""
+        import hashlib
+
+        h = hashlib.sha256()
+        h.update(f"{self.kind}|{self.text}|{self.about}|{self.selected}".encode())
+        for arr in (self.reference, self.sketch, self.base):
+            if arr is None:
+                h.update(b"-")
+            else:
+                a = np.ascontiguousarray(arr)
+                h.update(f"{a.shape}{a.dtype}".encode())
+                h.update(a.tobytes())
+        return h.hexdigest()
+
+
+@dataclass
+class Cost:
+    """What judging cost: paid model calls, tokens and money, plus answers served from cache."""
+
+    calls: int = 0
+    cached_calls: int = 0
+    failed_calls: int = 0
+    input_tokens: int = 0
+    output_tokens: int = 0
+    usd: float = 0.0
+    seconds: float = 0.0
+
+    def __iadd__(self, other: Cost) -> Cost:
+        self.calls += other.calls
+        self.cached_calls += other.cached_calls
+        self.failed_calls += other.failed_calls
+        self.input_tokens += other.input_tokens
+        self.output_tokens += other.output_tokens
+        self.usd += other.usd
+        self.seconds += other.seconds
+        return self
+
+    def __add__(self, other: Cost) -> Cost:
+        out = Cost(**self.__dict__)
+        out += other
+        return out
+
+    def to_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+@dataclass
+class Verdict:
+    """The outcome of one comparison.
+
+    ``per_aspect`` maps aspect keys to choices; ``overall`` is their weighted preference;
+    ``p_first`` is the probability the first image is better (1, 0.5 or 0 for a hard verdict).
+    ``error`` is set when the judge could not decide for a technical reason (logged tie).
+    """
+
+    per_aspect: dict[str, Choice]
+    overall: Choice
+    p_first: float
+    cost: Cost = field(default_factory=Cost)
+    rationale: dict[str, str] = field(default_factory=dict)
+    cached: bool = False
+    error: str | None = None
+
+    def swapped(self) -> Verdict:
+        """The verdict as if the two images had been given in the other order."""
+        return Verdict(
+            per_aspect={k: v.swapped() for k, v in self.per_aspect.items()},
+            overall=self.overall.swapped(),
+            p_first=1.0 - self.p_first,
+            cost=self.cost,
+            rationale=dict(self.rationale),
+            cached=self.cached,
+            error=self.error,
+        )
+
+    def to_dict(self) -> dict:
+        return {
+            "per_aspect": {k: v.value for k, v in self.per_aspect.items()},
+            "overall": self.overall.value,
+            "p_first": self.p_first,
+            "cost": self.cost.to_dict(),
+            "rationale": self.rationale,
+            "cached": self.cached,
+            "error": self.error,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Verdict:
+        return cls(
+            per_aspect={k: Choice(v) for k, v in d["per_aspect"].items()},
+            overall=Choice(d["overall"]),
+            p_first=float(d["p_first"]),
+            cost=Cost(**d.get("cost", {})),
+            rationale=dict(d.get("rationale", {})),
+            cached=bool(d.get("cached", False)),
+            error=d.get("error"),
+        )
+
+
+def weighted_overall(per_aspect: dict[str, Choice], aspects: Sequence[Aspect]) -> tuple[Choice, float]:
+    """Combine per-aspect choices by aspect weight into an overall choice and P(first better)."""
+    weights = {a.key: a.weight for a in aspects}
+    total = sum(weights.get(k, 1.0) for k in per_aspect) or 1.0
+    p = sum(weights.get(k, 1.0) * c.score for k, c in per_aspect.items()) / total
+    if p > 0.5 + 1e-9:
+        return Choice.FIRST, p
+    if p < 0.5 - 1e-9:
+        return Choice.SECOND, p
+    return Choice.TIE, 0.5
+
+
+@runtime_checkable
+class Judge(Protocol):
+    """Compares two renderings under aspects and an intent."""
+
+    #: A short identifier used in cache keys and run records ("metric", "openai:gpt-4o", ...).
+    name: str
+
+    async def compare(
+        self,
+        first: np.ndarray,
+        second: np.ndarray,
+        aspects: Sequence[Aspect],
+        intent: Intent,
+    ) -> Verdict:
+        """Compare ``first`` and ``second`` (uint8 RGB, shape (H, W, 3))."""
+        ...
