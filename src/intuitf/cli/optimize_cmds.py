@@ -1,0 +1,262 @@
+"""``intuitf optimize`` (the main job) and ``intuitf demo`` (the main job on built-in inputs)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from intuitf.errors import IntuitfError, SessionError
+
+console = Console()
+
+DEMO_TEXT = "opaque ivory bone, faint red skin"
+DEMO_ABOUT = "a CT-like phantom of a human head"
+
+
+def _build_intent(text, image, sketch, on, about):
+    from intuitf.evaluator.types import Intent
+    from intuitf.imageio import load_image, load_image_rgba
+
+    if sketch is not None:
+        if on is None:
+            raise IntuitfError("--sketch needs --on BASE.png: the rendering the strokes were drawn on.")
+        return Intent(kind="sketch", text=text, sketch=load_image_rgba(sketch), base=load_image(on), about=about)
+    if image is not None:
+        return Intent(kind="image", text=text, reference=load_image(image), about=about)
+    if text:
+        return Intent(kind="text", text=text, about=about)
+    return Intent(kind="none", about=about)
+
+
+def _make_judge(spec: str, run_dir: Path, base_url, budget_usd, budget_calls, spent=None):
+    from intuitf.evaluator.budget import Budget
+    from intuitf.evaluator.cache import VerdictCache
+    from intuitf.evaluator.factory import make_judge
+
+    options = {}
+    if base_url:
+        options["base_url"] = base_url
+    budget = None
+    if budget_usd is not None or budget_calls is not None:
+        budget = Budget(max_usd=budget_usd, max_calls=budget_calls)
+        if spent is not None:
+            budget.charge(calls=spent.calls, usd=spent.usd)
+    if spec == "metric":
+        return make_judge(spec)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    return make_judge(spec, cache=VerdictCache(run_dir / "verdicts.sqlite"), budget=budget, **options)
+
+
+class _ProgressView:
+    """Rich progress: generation, tournament round, calls, cost so far, time left."""
+
+    def __init__(self, progress: Progress) -> None:
+        self.progress = progress
+        self.task = None
+
+    def __call__(self, e) -> None:
+        if self.task is None:
+            self.task = self.progress.add_task("starting", total=e.generations, completed=e.generation)
+        left = ""
+        if e.seconds_per_generation:
+            remaining = (e.generations - e.generation) * e.seconds_per_generation
+            left = f" · ~{remaining:.0f}s left"
+        what = {
+            "generation_start": "rendering",
+            "rendered": "judging",
+            "round": f"round {e.round}/{e.rounds}",
+            "generation_end": "done",
+            "end": "finished",
+        }.get(e.kind, e.kind)
+        desc = (
+            f"gen {min(e.generation + 1, e.generations)}/{e.generations} [{e.stage}] {what} · "
+            f"{e.cost.calls} calls ({e.cost.cached_calls} cached) · ${e.cost.usd:.3f}{left}"
+        )
+        self.progress.update(self.task, description=desc, completed=e.generation)
+
+
+def _run_with_progress(session):
+    with Progress(
+        SpinnerColumn(),
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=False,
+    ) as progress:
+        return session.run(_ProgressView(progress))
+
+
+def _print_summary(outcome, session, started: float) -> None:
+    table = Table(title="Best transfer functions", show_lines=False)
+    table.add_column("rank", justify="right")
+    table.add_column("rating", justify="right")
+    table.add_column("Gaussians (mean in data units, opacity)")
+    lo, hi = session.volume.value_range
+    for i, (tf, rating) in enumerate(outcome.best, start=1):
+        desc = ", ".join(f"{lo + g.mean * (hi - lo):.4g}:{g.height:.2f}" for g in sorted(tf.gaussians, key=lambda g: g.mean))
+        table.add_row(str(i), f"{rating:.0f}", desc)
+    console.print(table)
+    c = outcome.cost
+    console.print(
+        f"{outcome.generations_done} generation(s), {c.calls} paid call(s), {c.cached_calls} from cache, "
+        f"{c.input_tokens + c.output_tokens} tokens, ${c.usd:.4f}, {time.perf_counter() - started:.1f} s."
+    )
+    if outcome.run_dir is not None:
+        color = "green" if outcome.completed else "yellow"
+        console.print(f"[{color}]{outcome.message}[/]")
+        console.print(f"Results: [bold]{outcome.run_dir}[/]  (report: {outcome.run_dir / 'report.html'})")
+        if not outcome.completed:
+            console.print(f"Continue with: intuitf optimize --resume {outcome.run_dir}")
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def optimize(
+        volume: str = typer.Argument(None, help="Volume file or folder (or 'phantom'). Not needed with --resume."),
+        text: str = typer.Option(None, "--text", help="What you want, in words."),
+        image: Path = typer.Option(None, "--image", help="A reference picture whose style to match."),
+        sketch: Path = typer.Option(None, "--sketch", help="Coloured strokes (PNG with transparency)."),
+        on: Path = typer.Option(None, "--on", help="The rendering the sketch was drawn on."),
+        about: str = typer.Option(None, "--about", help="What the volume is, e.g. 'a CT of a human foot'."),
+        evaluator: str = typer.Option("metric", "--evaluator", help="metric | openai:MODEL | gemini:MODEL | ollama:MODEL | vllm:MODEL | lmstudio:MODEL | openrouter:MODEL | URL"),
+        base_url: str = typer.Option(None, "--base-url", help="Server URL for an OpenAI-compatible model."),
+        population: int = typer.Option(32, "--population"),
+        generations: int = typer.Option(12, "--generations"),
+        gaussians: int = typer.Option(5, "--gaussians"),
+        budget_usd: float = typer.Option(None, "--budget-usd", help="Stop cleanly before spending more."),
+        budget_calls: int = typer.Option(None, "--budget-calls", help="Stop cleanly before more model calls."),
+        seed: int = typer.Option(0, "--seed"),
+        explorer: str = typer.Option("ga", "--explorer", help="ga | cmaes | random | paper-ga"),
+        protocol: str = typer.Option("efficient", "--protocol", help="efficient | paper (tournament)"),
+        size: int = typer.Option(256, "--size", help="Image size for judging."),
+        output_size: int = typer.Option(512, "--output-size", help="Image size of the best renderings."),
+        top: int = typer.Option(4, "--top", help="How many best TFs to keep."),
+        shading: bool = typer.Option(True, "--shading/--no-shading"),
+        azimuth: float = typer.Option(None, "--azimuth"),
+        elevation: float = typer.Option(None, "--elevation"),
+        start_from: list[Path] = typer.Option(None, "--start-from", help="TF JSON to include in the first population (repeatable)."),
+        output: Path = typer.Option(None, "-o", "--output", help="Run folder (default: runs/<volume>-<time>)."),
+        resume: Path = typer.Option(None, "--resume", help="Continue the run in this folder."),
+        overwrite: bool = typer.Option(False, "--overwrite", help="Replace a run already in the output folder."),
+        shape: str = typer.Option(None, "--shape", help="Raw files: X,Y,Z"),
+        dtype: str = typer.Option(None, "--dtype", help="Raw files: uint8, uint16, int16, float32, ..."),
+        byte_order: str = typer.Option(None, "--byte-order", help="Raw files: little | big"),
+        spacing: str = typer.Option(None, "--spacing", help="Voxel spacing X,Y,Z"),
+        max_dim: int = typer.Option(None, "--max-dim", help="Downsample volumes larger than this."),
+    ) -> None:
+        """Find transfer functions that match what you want, unattended."""
+        from intuitf.cli.options import load_volume_from_options
+
+        started = time.perf_counter()
+        if resume is not None:
+            session = _resume_session(resume, budget_usd, budget_calls, base_url)
+        else:
+            if volume is None:
+                raise IntuitfError("Give a VOLUME to optimize (or 'phantom'), or --resume RUN_DIR.")
+            vol_args = dict(shape=shape, dtype=dtype, byte_order=byte_order, spacing=spacing, max_dim=max_dim)
+            vol = load_volume_from_options(volume, **vol_args)
+            for note in vol.notes:
+                console.print(f"[yellow]note:[/] {note}")
+            intent = _build_intent(text, image, sketch, on, about)
+            run_dir = output or Path("runs") / f"{vol.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+            session = _new_session(
+                vol, intent, evaluator, base_url, run_dir,
+                dict(population=population, generations=generations, n_gaussians=gaussians, seed=seed,
+                     explorer=explorer, protocol=protocol, image_size=size, output_size=output_size,
+                     top_k=top, shading=shading,
+                     camera=_camera_dict(azimuth, elevation)),
+                budget_usd, budget_calls, start_from or [], overwrite,
+                {"volume_source": volume, "volume_args": vol_args, "evaluator": evaluator, "base_url": base_url},
+            )
+        console.print(
+            f"Optimizing [bold]{session.volume.name}[/] with {getattr(session.judge, 'name', 'judge')}: "
+            f"population {session.settings.population}, {session.total_generations} generations "
+            f"({', '.join(f'{s} {n}' for s, n in session.plan)}); run folder {session.run_dir.root}"
+        )
+        outcome = _run_with_progress(session)
+        _print_summary(outcome, session, started)
+        if not outcome.completed:
+            raise typer.Exit(3 if outcome.reason != "interrupted" else 130)
+
+    @app.command()
+    def demo(
+        output: Path = typer.Option(Path("intuitf-output/demo"), "-o", "--output", help="Run folder."),
+        generations: int = typer.Option(8, "--generations"),
+        population: int = typer.Option(24, "--population"),
+    ) -> None:
+        """Run the main job end to end on built-in inputs: phantom volume, offline judge, a text intent."""
+        from intuitf.evaluator.types import Intent
+        from intuitf.volume import phantom
+
+        started = time.perf_counter()
+        vol = phantom()
+        intent = Intent(kind="text", text=DEMO_TEXT, about=DEMO_ABOUT)
+        console.print(f"Demo: optimizing the built-in phantom for “{DEMO_TEXT}” with the offline metric judge.")
+        session = _new_session(
+            vol, intent, "metric", None, output,
+            dict(population=population, generations=generations, seed=0, image_size=160, output_size=384, top_k=4),
+            None, None, [], True,
+            {"volume_source": "phantom", "volume_args": {}, "evaluator": "metric", "base_url": None},
+        )
+        outcome = _run_with_progress(session)
+        _print_summary(outcome, session, started)
+        if outcome.run_dir is not None:
+            console.print(f"Open {outcome.run_dir / 'report.html'} in a browser to see the results.")
+
+
+def _camera_dict(azimuth, elevation) -> dict:
+    d = {}
+    if azimuth is not None:
+        d["azimuth"] = azimuth
+    if elevation is not None:
+        d["elevation"] = elevation
+    if not d:
+        return {}
+    from intuitf.render import Camera
+
+    return Camera(**d).to_dict()
+
+
+def _new_session(vol, intent, evaluator, base_url, run_dir, settings_kw, budget_usd, budget_calls, start_from, overwrite, record):
+    from intuitf.session import RunSettings, Session
+    from intuitf.tf import load_tf
+
+    settings = RunSettings(**settings_kw)
+    settings.validate()
+    run_dir = Path(run_dir)
+    if (run_dir / "run.json").exists() and not overwrite:
+        raise SessionError(
+            f"{run_dir} already holds a run.",
+            f"Continue it with --resume {run_dir}, or pick another folder with -o (or --overwrite).",
+        )
+    judge = _make_judge(evaluator, run_dir, base_url, budget_usd, budget_calls)
+    initial = [load_tf(p) for p in start_from]
+    return Session.create(
+        vol, intent=intent, judge=judge, settings=settings, run_dir=run_dir,
+        initial=initial, overwrite=overwrite, extra_record=record,
+    )
+
+
+def _resume_session(run_dir: Path, budget_usd, budget_calls, base_url):
+    from intuitf.cli.options import load_volume_from_options
+    from intuitf.session import RunDirectory, Session
+
+    rd = RunDirectory(run_dir)
+    record = rd.read_run()
+    vol = load_volume_from_options(record.get("volume_source", "phantom"), **record.get("volume_args", {}))
+    ckpt = rd.read_checkpoint() or {}
+    from intuitf.evaluator.types import Cost
+
+    spent = Cost(**ckpt.get("cost", {})) if ckpt else None
+    judge = _make_judge(record.get("evaluator", "metric"), rd.root, base_url or record.get("base_url"),
+                        budget_usd, budget_calls, spent)
+    session = Session.resume(rd.root, vol, judge)
+    if session.done:
+        console.print("[green]This run is already complete.[/] Rewriting its outputs.")
+    return session

@@ -1,0 +1,67 @@
+"""What a run leaves behind for people: best renderings, TFs, plots, exports and a report."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
+from intuitf.session.rundir import atomic_write_bytes, atomic_write_json
+
+if TYPE_CHECKING:
+    from intuitf.session.session import Session
+
+
+def evolution_records(journal: list[dict]) -> list[dict]:
+    """Per-generation figures for the evolution plot, from journal entries.
+
+    A generation replayed after a resume appears twice in the journal; the last entry wins.
+    """
+    by_gen: dict[int, dict] = {}
+    for e in journal:
+        if e.get("type") == "generation":
+            by_gen[int(e["generation"])] = e
+    out = []
+    for g in sorted(by_gen):
+        e = by_gen[g]
+        ratings = [c["rating"] for c in e.get("candidates", [])] or [0.0]
+        out.append(
+            {
+                "generation": g,
+                "best_rating": max(ratings),
+                "mean_rating": sum(ratings) / len(ratings),
+                "min_rating": min(ratings),
+                "calls": e.get("calls", 0),
+                "cost_usd": e.get("cost_usd", 0.0),
+                "seconds": e.get("seconds", 0.0),
+            }
+        )
+    return out
+
+
+def write_run_outputs(session: Session) -> None:
+    """Write best/, evolution.png and report.html into the session's run folder."""
+    from intuitf.imageio import png_bytes
+    from intuitf.plots import evolution_plot, tf_plot
+    from intuitf.report import build_report
+    from intuitf.tf.export import EXPORT_FORMATS, export_tf
+
+    rd = session.run_dir
+    assert rd is not None
+    counts, _ = session.volume.histogram()
+    best = session.best(session.settings.top_k)
+    summary = []
+    for rank, (tf, rating) in enumerate(best, start=1):
+        tf = replace(tf.unfreeze(), value_range=session.volume.value_range, name=f"rank{rank:02d}")
+        stem = rd.best_dir / f"rank{rank:02d}"
+        image = session.render(tf)
+        atomic_write_bytes(stem.with_suffix(".png"), png_bytes(image))
+        atomic_write_bytes(stem.with_name(stem.name + ".tf.json"), tf.to_json().encode())
+        atomic_write_bytes(stem.with_name(stem.name + ".tf.png"), tf_plot(tf, counts))
+        for fmt, suffix in EXPORT_FORMATS.items():
+            atomic_write_bytes(stem.with_name(stem.name + suffix), export_tf(tf, fmt).encode())
+        summary.append({"rank": rank, "rating": rating, "tf": f"best/rank{rank:02d}.tf.json"})
+    atomic_write_json(rd.best_dir / "summary.json", summary)
+    records = evolution_records(rd.read_journal())
+    if records:
+        atomic_write_bytes(rd.root / "evolution.png", evolution_plot(records))
+    build_report(rd.root)

@@ -1,0 +1,175 @@
+"""The run directory: where a session keeps everything it has paid for.
+
+Layout::
+
+    run.json            inputs, settings, seed, versions (written once, updated on resume)
+    journal.jsonl       append-only; one JSON object per line (generation, stage, end, ...)
+    checkpoint.json     the latest resumable state, replaced atomically
+    verdicts.sqlite     every model verdict, keyed by the content of the question
+    population/         current population as TF JSON (one file, replaced atomically)
+    best/               rank01.png, rank01.tf.json, rank01.tf.png and exports
+    generations/        gen000.png contact sheets
+    evolution.png       ratings, calls, cost and time per generation
+    report.html         a self-contained page with all of it
+
+Every write is atomic (temporary file + rename) or an fsync'ed append, so a crash, a kill or a
+full disk never leaves a half-written file behind.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from intuitf.errors import SessionError
+
+
+def _disk_full_error(path: Path, exc: OSError) -> SessionError:
+    return SessionError(
+        f"Cannot write {path}: the disk is full. Everything written before this point is kept.",
+        "Free some space, then continue with --resume.",
+    )
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` so that readers see the old file or the new one, never half."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:
+        Path(tmp).unlink(missing_ok=True)
+        if exc.errno == errno.ENOSPC:
+            raise _disk_full_error(path, exc) from exc
+        raise SessionError(f"Cannot write {path}: {exc.strerror or exc}.") from exc
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def atomic_write_json(path: Path, obj: Any) -> None:
+    atomic_write_bytes(path, (json.dumps(obj, indent=2) + "\n").encode("utf-8"))
+
+
+class RunDirectory:
+    """Paths and safe reads/writes inside one run directory."""
+
+    def __init__(self, root: str | os.PathLike) -> None:
+        self.root = Path(root)
+
+    # -- paths ----------------------------------------------------------------------------
+    @property
+    def run_json(self) -> Path:
+        return self.root / "run.json"
+
+    @property
+    def journal(self) -> Path:
+        return self.root / "journal.jsonl"
+
+    @property
+    def checkpoint(self) -> Path:
+        return self.root / "checkpoint.json"
+
+    @property
+    def verdicts(self) -> Path:
+        return self.root / "verdicts.sqlite"
+
+    @property
+    def best_dir(self) -> Path:
+        return self.root / "best"
+
+    @property
+    def generations_dir(self) -> Path:
+        return self.root / "generations"
+
+    @property
+    def population_file(self) -> Path:
+        return self.root / "population" / "current.json"
+
+    # -- lifecycle ------------------------------------------------------------------------
+    def exists(self) -> bool:
+        return self.run_json.exists()
+
+    def create(self, *, overwrite: bool = False) -> None:
+        """Make the directory for a new run; refuse to mix two runs in one folder."""
+        if self.exists() and not overwrite:
+            raise SessionError(
+                f"{self.root} already holds a run.",
+                "Continue it with --resume, or choose another output folder with -o.",
+            )
+        try:
+            self.root.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise SessionError(f"Cannot create the run folder {self.root}: {exc.strerror or exc}.") from exc
+        if overwrite:
+            for p in (self.journal, self.checkpoint):
+                p.unlink(missing_ok=True)
+
+    # -- records --------------------------------------------------------------------------
+    def write_run(self, record: dict) -> None:
+        atomic_write_json(self.run_json, record)
+
+    def read_run(self) -> dict:
+        try:
+            return json.loads(self.run_json.read_text(encoding="utf-8"))
+        except FileNotFoundError as exc:
+            raise SessionError(
+                f"{self.root} is not a run folder (no run.json).",
+                "Point --resume at a folder written by `intuitf optimize`.",
+            ) from exc
+        except (OSError, json.JSONDecodeError) as exc:
+            raise SessionError(f"{self.run_json} is unreadable or corrupt: {exc}.") from exc
+
+    def append_journal(self, entry: dict) -> None:
+        """Append one line and fsync it: the journal is the run's memory."""
+        line = json.dumps(entry, separators=(",", ":")) + "\n"
+        try:
+            self.root.mkdir(parents=True, exist_ok=True)
+            with open(self.journal, "a", encoding="utf-8") as fh:
+                fh.write(line)
+                fh.flush()
+                os.fsync(fh.fileno())
+        except OSError as exc:
+            if exc.errno == errno.ENOSPC:
+                raise _disk_full_error(self.journal, exc) from exc
+            raise SessionError(f"Cannot append to {self.journal}: {exc.strerror or exc}.") from exc
+
+    def read_journal(self) -> list[dict]:
+        """All complete entries; a line cut short by a crash is ignored."""
+        return list(self.iter_journal())
+
+    def iter_journal(self) -> Iterator[dict]:
+        if not self.journal.exists():
+            return
+        with open(self.journal, encoding="utf-8") as fh:
+            for line in fh:
+                line = line.strip()
+                if not line:
+                    continue
+                try:
+                    yield json.loads(line)
+                except json.JSONDecodeError:
+                    continue
+
+    def write_checkpoint(self, state: dict) -> None:
+        atomic_write_json(self.checkpoint, state)
+
+    def read_checkpoint(self) -> dict | None:
+        if not self.checkpoint.exists():
+            return None
+        try:
+            return json.loads(self.checkpoint.read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError) as exc:
+            raise SessionError(
+                f"The checkpoint {self.checkpoint} is corrupt: {exc}.",
+                "Delete it to restart the run from the beginning (paid verdicts stay cached).",
+            ) from exc

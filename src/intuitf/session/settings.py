@@ -1,0 +1,71 @@
+"""Settings of an optimisation run, kept in run.json so a resumed run uses exactly the same."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields
+
+from intuitf.errors import SessionError
+
+
+@dataclass
+class RunSettings:
+    """Everything that decides what a run does, apart from the volume, intent and judge.
+
+    ``stages`` is the plan: a list of (stage name, generations). By default a run with an
+    intent spends about a third of its generations in ``initialize`` (quality only, to find
+    the volume's structures) and the rest in ``customize`` (the intent); a run without an
+    intent stays in ``initialize``.
+    """
+
+    population: int = 32
+    generations: int = 12
+    n_gaussians: int = 5
+    seed: int = 0
+    explorer: str = "ga"
+    protocol: str = "efficient"
+    image_size: int = 256
+    output_size: int = 512
+    shading: bool = True
+    background: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    camera: dict = field(default_factory=dict)
+    top_k: int = 4
+    init_share: float = 0.34
+    stages: list[tuple[str, int]] = field(default_factory=list)
+
+    def validate(self) -> None:
+        if not 4 <= self.population <= 1000:
+            raise SessionError(f"--population must be within 4..1000, got {self.population}.")
+        if not 1 <= self.generations <= 10_000:
+            raise SessionError(f"--generations must be at least 1, got {self.generations}.")
+        if not 1 <= self.n_gaussians <= 16:
+            raise SessionError(f"--gaussians must be within 1..16, got {self.n_gaussians}.")
+        if not 32 <= self.image_size <= 2048 or not 32 <= self.output_size <= 4096:
+            raise SessionError("Image sizes must be within 32..2048 (judging) and 32..4096 (output).")
+        if self.top_k < 1:
+            raise SessionError("--top must be at least 1.")
+
+    def stage_plan(self, has_intent: bool) -> list[tuple[str, int]]:
+        """The (stage, generations) list this run follows."""
+        if self.stages:
+            return [(str(s), int(n)) for s, n in self.stages]
+        if not has_intent or self.generations < 2:
+            return [("initialize", self.generations)]
+        n_init = max(1, round(self.generations * self.init_share))
+        n_init = min(n_init, self.generations - 1)
+        return [("initialize", n_init), ("customize", self.generations - n_init)]
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["background"] = list(self.background)
+        d["stages"] = [list(s) for s in self.stages]
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> RunSettings:
+        known = {f.name for f in fields(cls)}
+        kw = {k: v for k, v in d.items() if k in known}
+        if "background" in kw:
+            kw["background"] = tuple(kw["background"])
+        if "stages" in kw:
+            kw["stages"] = [tuple(s) for s in kw["stages"]]
+        return cls(**kw)
