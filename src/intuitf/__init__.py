@@ -8,7 +8,7 @@ and the Explorer live in their packages and are re-exported here as they land.
 
 from intuitf.errors import IntuitfError
 from intuitf.tf import Gaussian, GaussianTF, default_tf, load_tf, save_tf
-from intuitf.volume import Volume
+from intuitf.volume import Volume, load_volume, phantom
 
 __version__ = "0.1.0"
 
@@ -20,5 +20,7 @@ __all__ = [
     "__version__",
     "default_tf",
     "load_tf",
+    "load_volume",
+    "phantom",
     "save_tf",
 ]

@@ -140,12 +140,20 @@ class Volume:
     def to_original(self, normalised: np.ndarray | float) -> np.ndarray | float:
         """Map normalised values in [0, 1] to the data's own units."""
         lo, hi = self.value_range
-        return lo + np.asarray(normalised) * (hi - lo) if np.ndim(normalised) else lo + float(normalised) * (hi - lo)
+        return (
+            lo + np.asarray(normalised) * (hi - lo)
+            if np.ndim(normalised)
+            else lo + float(normalised) * (hi - lo)
+        )
 
     def to_normalised(self, original: np.ndarray | float) -> np.ndarray | float:
         """Map values in the data's own units to [0, 1]."""
         lo, hi = self.value_range
-        return (np.asarray(original) - lo) / (hi - lo) if np.ndim(original) else (float(original) - lo) / (hi - lo)
+        return (
+            (np.asarray(original) - lo) / (hi - lo)
+            if np.ndim(original)
+            else (float(original) - lo) / (hi - lo)
+        )
 
     def histogram(self, bins: int = 256) -> tuple[np.ndarray, np.ndarray]:
         """Counts and bin edges of the normalised values over [0, 1]."""
