@@ -32,7 +32,10 @@ HEIGHT_RANGE = (0.0, 1.0)
 
 
 def _check_range(name: str, value: float, bounds: tuple[float, float]) -> float:
-    v = float(value)
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        v = math.nan  # not a number at all: reported below like any other bad value
     if not math.isfinite(v) or v < bounds[0] or v > bounds[1]:
         raise TransferFunctionError(
             f"Gaussian {name} must be within [{bounds[0]}, {bounds[1]}], got {value!r}."
@@ -57,7 +60,10 @@ class Gaussian:
         object.__setattr__(self, "mean", _check_range("mean", self.mean, MEAN_RANGE))
         object.__setattr__(self, "width", _check_range("width", self.width, WIDTH_RANGE))
         object.__setattr__(self, "height", _check_range("height", self.height, HEIGHT_RANGE))
-        col = tuple(float(c) for c in self.color)
+        try:
+            col = tuple(float(c) for c in self.color)
+        except (TypeError, ValueError):
+            col = ()  # not numbers: reported below
         if len(col) != 3 or not all(math.isfinite(c) and 0.0 <= c <= 1.0 for c in col):
             raise TransferFunctionError(f"Gaussian color must be three values in [0, 1], got {self.color!r}.")
         object.__setattr__(self, "color", col)
@@ -113,7 +119,10 @@ class GaussianTF:
             raise TransferFunctionError("GaussianTF.gaussians must hold Gaussian objects.")
         object.__setattr__(self, "gaussians", gs)
         if self.value_range is not None:
-            lo, hi = (float(v) for v in self.value_range)
+            try:
+                lo, hi = (float(v) for v in self.value_range)
+            except (TypeError, ValueError):
+                lo = hi = math.nan  # not a pair of numbers: reported below
             if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
                 raise TransferFunctionError(f"value_range must be (low, high) with high > low, got {self.value_range!r}.")
             object.__setattr__(self, "value_range", (lo, hi))
@@ -163,6 +172,10 @@ class GaussianTF:
         """
         if not 2 <= int(size) <= 65536:
             raise TransferFunctionError(f"LUT size must be within [2, 65536], got {size}.")
+        if not (math.isfinite(sample_distance) and sample_distance > 0):
+            raise TransferFunctionError(
+                f"The sample distance must be a positive number of voxels, got {sample_distance}."
+            )
         s = np.linspace(0.0, 1.0, int(size))
         out = np.empty((int(size), 4), dtype=np.float32)
         out[:, :3] = self.color(s)
@@ -216,7 +229,13 @@ class GaussianTF:
                 "This is not an intuitf transfer function (missing \"format\": \"intuitf.gaussian-tf\").",
                 "Use a TF JSON written by intuitf (optimize, export or the web app).",
             )
-        if int(d.get("version", 0)) > TF_VERSION:
+        try:
+            version = int(d.get("version", 0))
+        except (TypeError, ValueError) as exc:
+            raise TransferFunctionError(
+                f"The transfer function's \"version\" must be a whole number, got {d.get('version')!r}."
+            ) from exc
+        if version > TF_VERSION:
             raise TransferFunctionError(
                 f"This transfer function has format version {d.get('version')}, newer than this "
                 f"intuitf understands ({TF_VERSION}).",
@@ -228,9 +247,10 @@ class GaussianTF:
         vr = d.get("value_range")
         return cls(
             gaussians=tuple(Gaussian.from_dict(g) for g in gs),
-            value_range=tuple(vr) if vr is not None else None,
+            # Anything but a list is passed on as is, for __post_init__ to reject clearly.
+            value_range=tuple(vr) if isinstance(vr, list | tuple) else vr,
             name=str(d.get("name", "")),
-            metadata=dict(d.get("metadata", {})),
+            metadata=dict(md) if isinstance(md := d.get("metadata"), dict) else {},
         )
 
     def to_json(self, indent: int | None = 2) -> str:
