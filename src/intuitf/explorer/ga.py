@@ -1,0 +1,69 @@
+"""The evolution-driven Explorer: elitism, roulette-wheel selection, crossover, mutation."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from intuitf.explorer.base import BaseExplorer
+from intuitf.explorer.candidate import Candidate
+from intuitf.explorer.operators import crossover, elite_count, mutate, roulette
+from intuitf.tf.gaussian import GaussianTF
+
+
+def _canonical(tf: GaussianTF) -> GaussianTF:
+    """Sorted by mean unless something is frozen (then indices name selected features)."""
+    return tf if tf.frozen_mask().any() else tf.sorted()
+
+
+class Explorer(BaseExplorer):
+    """Genetic algorithm over Gaussian-mixture TFs, in ask/tell style.
+
+    >>> ex = Explorer(population=8, n_gaussians=3, generations=5, seed=1)
+    >>> cands = ex.ask()                       # render these
+    >>> ex.tell([c.id for c in cands])         # ids, best first (here: as asked)
+    >>> len(ex.ask())
+    8
+
+    Each ``tell`` keeps the top ``elite_share(progress)`` of the ranking unchanged (same
+    ids, at least one), draws the remaining parents by roulette wheel over fitness (with
+    replacement), pairs them, crosses each pair with the stage's crossover rate, mutates
+    every child, and replaces near-duplicates by fresh variation. The population size never
+    changes. See :class:`~intuitf.explorer.stages.StagePreset` for the rates.
+    """
+
+    method = "ga"
+
+    def _next_population(
+        self, ranked: list[Candidate], fitness: np.ndarray, progress: float
+    ) -> list[Candidate]:
+        preset = self._preset
+        n = self.population_size
+        n_elite = elite_count(preset.elite_share(progress), min(n, len(ranked)))
+        nxt: list[Candidate] = list(ranked[:n_elite])
+        params = preset.mutation_params(progress)
+        cx_rate = preset.crossover_rate.at(progress)
+        picks = roulette(fitness, n - n_elite, self._rng)
+        for k in range(0, len(picks), 2):
+            pa = ranked[int(picks[k])]
+            pb = ranked[int(picks[k + 1])] if k + 1 < len(picks) else None
+            if pb is not None and pa.id != pb.id and self._rng.random() < cx_rate:
+                ca, cb = crossover(
+                    pa.tf,
+                    pb.tf,
+                    self._rng,
+                    attr_prob=preset.attr_prob,
+                    groups=preset.groups,
+                    fallback_prob=preset.fallback_prob,
+                )
+                children = [(ca, "crossover", (pa.id, pb.id)), (cb, "crossover", (pb.id, pa.id))]
+            else:
+                children = [(pa.tf, "mutation", (pa.id,))]
+                if pb is not None:
+                    children.append((pb.tf, "mutation", (pb.id,)))
+            for tf, origin, parents in children:
+                if len(nxt) >= n:
+                    break
+                tf = _canonical(mutate(tf, self._rng, params, self.bounds))
+                tf = _canonical(self.dedup(tf, nxt, params))
+                nxt.append(self._new(tf, origin, parents))
+        return nxt

@@ -1,0 +1,181 @@
+"""Variation and selection operators on Gaussian-mixture TFs.
+
+Pure functions: each takes the TFs and an ``np.random.Generator`` and returns new TFs.
+Frozen Gaussians are never read for swapping nor changed; every changed value is clipped
+to the :class:`~intuitf.explorer.bounds.Bounds`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from intuitf.explorer.bounds import Bounds, hsl_to_rgb, rgb_to_hsl
+from intuitf.tf.gaussian import Gaussian, GaussianTF
+
+#: Gaussian attributes crossover may exchange.
+ATTRIBUTES = ("mean", "width", "height", "color")
+
+#: Attribute groups exchanged together, after the paper: colour, position, shape.
+PAPER_GROUPS: tuple[tuple[str, ...], ...] = (("color",), ("mean",), ("width", "height"))
+
+
+def _clip(v: float, r: tuple[float, float]) -> float:
+    return min(r[1], max(r[0], float(v)))
+
+
+@dataclass(frozen=True)
+class MutationParams:
+    """Concrete mutation rates and step sizes (at one point of a stage's progress).
+
+    Steps are standard deviations. With ``additive`` false (the default), width and height
+    take multiplicative steps ``x · exp(N(0, step))``: opacity and feature size are perceived
+    in ratios, and an additive step that is right for 0.3 wipes out a 0.01 Gaussian. With
+    ``additive`` true, every step is additive and scaled by the bound's span, as in the
+    authors' prototype. The mean step is in normalised units (fraction of the data range);
+    the hue step is in hue units (one turn = 1) and wraps around when the hue bound is full.
+    """
+
+    rate: float  # probability that a free Gaussian's width, and its height, change
+    mean_rate: float  # probability that a free Gaussian's mean changes
+    mean_step: float
+    width_step: float
+    height_step: float
+    color_rate: float  # probability that each of hue, saturation, lightness changes
+    hue_step: float
+    sl_step: float  # saturation and lightness step, as a fraction of their bound's span
+    swap_prob: float = 0.3  # per individual: swap two Gaussians' colours instead of HSL steps
+    channel_prob: float = 0.05  # per Gaussian: permute its own RGB channels instead
+    additive: bool = False
+
+    def forced(self) -> MutationParams:
+        """Every attribute changes: used to push a near-duplicate away from its twin."""
+        return replace(self, rate=1.0, mean_rate=1.0, color_rate=1.0, swap_prob=0.0)
+
+
+def _mutate_color(
+    color: tuple[float, float, float], rng: np.random.Generator, p: MutationParams, b: Bounds
+) -> tuple[float, float, float]:
+    if rng.random() < p.channel_prob:
+        # Recombine the colour's own channels: a new hue of the same saturation and lightness.
+        perm = rng.permutation(3)
+        return b.clip_color(tuple(color[int(k)] for k in perm))
+    h, s, lum = rgb_to_hsl(color)
+    changed = False
+    if rng.random() < p.color_rate:
+        h = h + rng.normal(0.0, p.hue_step)
+        h = h % 1.0 if b.hue_circular else _clip(h, b.hue)
+        changed = True
+    if rng.random() < p.color_rate:
+        s = _clip(
+            s + rng.normal(0.0, p.sl_step * (b.saturation[1] - b.saturation[0])), b.saturation
+        )
+        changed = True
+    if rng.random() < p.color_rate:
+        lum = _clip(
+            lum + rng.normal(0.0, p.sl_step * (b.lightness[1] - b.lightness[0])), b.lightness
+        )
+        changed = True
+    return b.clip_color(hsl_to_rgb(h, s, lum)) if changed else color
+
+
+def mutate(
+    tf: GaussianTF,
+    rng: np.random.Generator,
+    p: MutationParams,
+    bounds: Bounds,
+    only: Sequence[int] | None = None,
+) -> GaussianTF:
+    """A mutated copy of ``tf``: height, width, position and colour steps on free Gaussians.
+
+    ``only`` restricts the mutation to those Gaussian indices (frozen ones still excluded).
+    Colour mutation is, per individual, either a swap of two free Gaussians' colours (with
+    ``swap_prob``) or per-Gaussian HSL steps with occasional channel recombination.
+    """
+    b = bounds
+    gs = list(tf.gaussians)
+    free = [i for i, g in enumerate(gs) if not g.frozen and (only is None or i in only)]
+    if not free:
+        return tf
+    for i in free:
+        g = gs[i]
+        mean, width, height = g.mean, g.width, g.height
+        if rng.random() < p.mean_rate:
+            mean = _clip(mean + rng.normal(0.0, p.mean_step * (b.mean[1] - b.mean[0])), b.mean)
+        if rng.random() < p.rate:
+            if p.additive:
+                width = width + rng.normal(0.0, p.width_step * (b.width[1] - b.width[0]))
+            else:
+                width = width * math.exp(rng.normal(0.0, p.width_step))
+            width = _clip(width, b.width)
+        if rng.random() < p.rate:
+            if p.additive:
+                height = height + rng.normal(0.0, p.height_step * (b.height[1] - b.height[0]))
+            else:
+                height = max(height, b.height_floor) * math.exp(rng.normal(0.0, p.height_step))
+            height = _clip(height, b.height)
+        gs[i] = replace(g, mean=mean, width=width, height=height)
+    if len(free) >= 2 and rng.random() < p.swap_prob:
+        i, j = (int(k) for k in rng.choice(free, size=2, replace=False))
+        gs[i], gs[j] = replace(gs[i], color=gs[j].color), replace(gs[j], color=gs[i].color)
+    else:
+        for i in free:
+            gs[i] = replace(gs[i], color=_mutate_color(gs[i].color, rng, p, b))
+    return tf.with_gaussians(gs)
+
+
+def _swap(a: Gaussian, b: Gaussian, attrs: Sequence[str]) -> tuple[Gaussian, Gaussian]:
+    da = {k: getattr(b, k) for k in attrs}
+    db = {k: getattr(a, k) for k in attrs}
+    return replace(a, **da), replace(b, **db)
+
+
+def crossover(
+    a: GaussianTF,
+    b: GaussianTF,
+    rng: np.random.Generator,
+    *,
+    attr_prob: float = 0.4,
+    groups: Sequence[Sequence[str]] = PAPER_GROUPS,
+    fallback_prob: float = 0.5,
+) -> tuple[GaussianTF, GaussianTF]:
+    """Two children that exchange Gaussian attributes between parents ``a`` and ``b``.
+
+    Free Gaussians are paired by position (k-th lowest mean with k-th lowest mean). For each
+    pair, every attribute group (e.g. colour; position; shape = width + height) is exchanged
+    independently with ``attr_prob``; if none was, one random group is exchanged with
+    ``fallback_prob``. Frozen Gaussians take no part. Children keep their parent's order.
+    """
+    for grp in groups:
+        for k in grp:
+            if k not in ATTRIBUTES:
+                raise ValueError(f"Unknown Gaussian attribute {k!r}; use {ATTRIBUTES}.")
+    ga, gb = list(a.gaussians), list(b.gaussians)
+    ia = sorted((i for i, g in enumerate(ga) if not g.frozen), key=lambda i: ga[i].mean)
+    ib = sorted((i for i, g in enumerate(gb) if not g.frozen), key=lambda i: gb[i].mean)
+    for i, j in zip(ia, ib, strict=False):
+        chosen = [grp for grp in groups if rng.random() < attr_prob]
+        if not chosen and rng.random() < fallback_prob:
+            chosen = [groups[int(rng.integers(len(groups)))]]
+        attrs = [k for grp in chosen for k in grp]
+        if attrs:
+            ga[i], gb[j] = _swap(ga[i], gb[j], attrs)
+    return a.with_gaussians(ga), b.with_gaussians(gb)
+
+
+def roulette(fitness: Sequence[float], k: int, rng: np.random.Generator) -> np.ndarray:
+    """``k`` indices drawn with replacement, each with probability proportional to its fitness."""
+    w = np.asarray(fitness, dtype=np.float64)
+    if w.ndim != 1 or w.size == 0 or not np.isfinite(w).all() or (w < 0).any():
+        raise ValueError("Fitness must be a non-empty sequence of finite, non-negative values.")
+    total = w.sum()
+    p = w / total if total > 0 else np.full(w.size, 1.0 / w.size)
+    return rng.choice(w.size, size=int(k), replace=True, p=p)
+
+
+def elite_count(share: float, n: int) -> int:
+    """How many elites a population of ``n`` keeps at ``share``: at least 1, at most n."""
+    return min(n, max(1, int(share * n + 1e-9)))
