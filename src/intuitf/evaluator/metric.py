@@ -1,0 +1,483 @@
+"""MetricJudge: an offline judge made of image statistics. No model, no network, deterministic.
+
+It is the embedded default so that everything runs without a model, and it is a *baseline*:
+it measures a few things that can be measured honestly and calls every other aspect a tie.
+
+What it measures (per image, on the *foreground*: pixels whose colour differs from the
+background, estimated as the median colour of the image border):
+
+=============================  ===========================================================
+aspect key                     measure (higher is better unless noted)
+=============================  ===========================================================
+``information_richness``       the paper's information-entropy baseline: Shannon entropy
+                               (bits) of the foreground's quantised colour histogram, times
+                               the foreground coverage's square root so that a speck of varied
+                               colour does not beat a fully visible object (0 below 0.5 %)
+``feature_discrimination``     colour variety: entropy of the foreground's chroma (CIELAB
+                               a*, b*) histogram, plus luminance contrast (std of L*, /100)
+``color_content_harmony``      not judged (tie): harmony is taste, not a statistic
+``text_alignment``             only what a text says checkably: named colours ("red", "ivory",
+                               "bone white", ...) must cover part of the foreground (share of
+                               foreground pixels within ΔE 25 of each, saturating at 5 %);
+                               "opaque" / "semi-opaque" / "transparent" / "faint" against the
+                               mean colour distance of the foreground from the background;
+                               "colorful" / "vibrant" against colour variety; "high-contrast"
+                               against contrast. A text with none of these is a tie.
+``color_style_matching``       CIELAB colour-distribution similarity to the reference image:
+                               intersection of coarse (L*, a*, b*) histograms of both
+                               foregrounds, minus the distance of their mean colours / 100
+``structural_style_matching``  SSIM of the luminance to the reference's, both resized to
+                               128 x 128
+``stroke_color_agreement``     minus the mean CIE76 ΔE between the rendering and the stroke
+                               colours where the sketch's alpha > 0
+``unmarked_preservation``      minus the mean ΔE to the base rendering where alpha == 0
+``edit_instruction_alignment`` named colours of the instruction inside the region (the alpha
+                               of ``intent.sketch`` when given, else the whole image); with no
+                               named colour, the amount of change from the base in the region
+                               (only with a region; otherwise a tie)
+``structure_preservation``     minus the mean ΔE to the base outside the region (everywhere
+                               when no region is given)
+=============================  ===========================================================
+
+Aspect keys it does not know are matched by keyword ("richness", "discrimination", "contrast",
+"text", "colour/color style", "structur", "stroke", "preserv", "instruction"); anything else is
+a tie. It cannot judge what a structure *is* (bone vs skin), aesthetics, depth perception,
+realism or style words ("Disney", "cyberpunk"); a model-based judge is needed for those.
+
+Per-image features are cached by content hash (bounded LRU), so an image met again in a
+tournament costs a dictionary lookup. A comparison at 256 x 256 takes a few milliseconds
+(``benchmarks/tournament.py`` prints the figure).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+import time
+from collections import OrderedDict
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from skimage.color import rgb2lab
+from skimage.metrics import structural_similarity
+from skimage.transform import resize
+
+from intuitf.evaluator.types import Aspect, Choice, Cost, Intent, Verdict, weighted_overall
+
+#: Colour names a text may use, as sRGB (0-255). Multi-word names are matched first.
+NAMED_COLOURS: dict[str, tuple[int, int, int]] = {
+    "bone white": (241, 235, 218),
+    "off white": (245, 245, 235),
+    "light blue": (150, 190, 240),
+    "dark blue": (20, 40, 140),
+    "sky blue": (135, 206, 235),
+    "navy blue": (20, 30, 110),
+    "light green": (144, 238, 144),
+    "dark green": (0, 100, 0),
+    "dark red": (139, 0, 0),
+    "light gray": (200, 200, 200),
+    "light grey": (200, 200, 200),
+    "dark gray": (80, 80, 80),
+    "dark grey": (80, 80, 80),
+    "red": (220, 30, 30),
+    "crimson": (220, 20, 60),
+    "maroon": (128, 0, 0),
+    "pink": (255, 160, 190),
+    "orange": (255, 140, 0),
+    "yellow": (240, 220, 40),
+    "yellowish": (230, 215, 90),
+    "gold": (212, 175, 55),
+    "golden": (212, 175, 55),
+    "green": (40, 170, 60),
+    "lime": (150, 230, 50),
+    "teal": (0, 128, 128),
+    "cyan": (0, 200, 220),
+    "turquoise": (64, 224, 208),
+    "blue": (40, 80, 220),
+    "navy": (20, 30, 110),
+    "purple": (130, 50, 160),
+    "violet": (150, 80, 220),
+    "magenta": (220, 40, 200),
+    "brown": (130, 80, 40),
+    "beige": (225, 205, 165),
+    "tan": (210, 180, 140),
+    "ivory": (250, 245, 225),
+    "white": (245, 245, 245),
+    "silver": (192, 192, 198),
+    "gray": (128, 128, 128),
+    "grey": (128, 128, 128),
+    "black": (20, 20, 20),
+}
+
+_COLOUR_RE = re.compile(
+    r"\b(" + "|".join(re.escape(k) for k in sorted(NAMED_COLOURS, key=len, reverse=True)) + r")\b"
+)
+# Typos such as "opque" / "opqaue" occur in real prompts; match them too.
+_SEMI_RE = re.compile(r"\b(semi[- ]?(op\w*|transparent)|translucent|half[- ]?transparent)\b")
+_OPAQUE_RE = re.compile(r"\b(fully?[- ]?)?op[aq]\w*e\b|\bsolid\b")
+_TRANSPARENT_RE = re.compile(r"\b(transparent|faint|ghost\w*|see[- ]through)\b")
+_COLOURFUL_RE = re.compile(r"\b(colou?rful|vibrant|rainbow|multicolou?red|diverse colou?rs)\b")
+_CONTRAST_RE = re.compile(r"\bhigh[- ]contrast\b")
+
+#: ΔE within which a pixel counts as showing a named colour.
+_NAMED_DELTA_E = 25.0
+#: Share of the foreground at which a named colour counts as fully present.
+_NAMED_SATURATION = 0.05
+#: Mean ΔE from the background that counts as "semi-opaque" (between faint and solid).
+_SEMI_TARGET = 35.0
+
+
+@dataclass
+class _Features:
+    """What the judge needs to know about one image."""
+
+    lab: np.ndarray  # (H, W, 3) float32
+    fg: np.ndarray  # (H, W) bool
+    bg_lab: np.ndarray  # (3,)
+    coverage: float
+    entropy: float
+    variety: float
+    contrast: float
+    opacity: float  # mean ΔE of the foreground from the background
+    lab_hist: np.ndarray  # normalised coarse Lab histogram of the foreground
+    mean_lab: np.ndarray
+    gray128: np.ndarray  # luminance in [0, 1], 128 x 128
+
+
+def _digest(arr: np.ndarray) -> str:
+    a = np.ascontiguousarray(arr)
+    h = hashlib.blake2b(digest_size=16)
+    h.update(f"{a.shape}{a.dtype}".encode())
+    h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def _entropy(counts: np.ndarray) -> float:
+    total = counts.sum()
+    if total <= 0:
+        return 0.0
+    p = counts[counts > 0] / total
+    return float(-(p * np.log2(p)).sum())
+
+
+def _to_rgb_u8(image: np.ndarray) -> np.ndarray:
+    img = np.asarray(image)
+    if img.ndim == 2:
+        img = np.repeat(img[..., None], 3, axis=2)
+    if img.shape[-1] == 4:
+        img = img[..., :3]
+    if img.dtype != np.uint8:
+        img = np.clip(
+            np.asarray(img, dtype=np.float64) * (255.0 if img.max() <= 1.0 else 1.0), 0, 255
+        )
+        img = img.astype(np.uint8)
+    return img
+
+
+def _features(image: np.ndarray) -> _Features:
+    rgb = _to_rgb_u8(image)
+    lab = rgb2lab(rgb.astype(np.float32) / 255.0).astype(np.float32)
+    border = np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]])
+    bg_lab = np.median(border, axis=0)
+    dist = np.linalg.norm(lab - bg_lab, axis=2)
+    fg = dist > 3.0  # below a just-noticeable difference counts as background
+    coverage = float(fg.mean())
+    fg_lab = lab[fg]
+    if fg_lab.shape[0] < max(16, int(0.005 * fg.size)):
+        fg_lab = np.zeros((0, 3), np.float32)
+    if fg_lab.shape[0]:
+        q = (rgb[fg] // 32).astype(np.int32)  # 8 levels per channel, 512 colour bins
+        colour_hist = np.bincount(q[:, 0] * 64 + q[:, 1] * 8 + q[:, 2], minlength=512)
+        entropy = _entropy(colour_hist) * np.sqrt(coverage)
+        ab = np.clip(((fg_lab[:, 1:] + 100.0) / 12.5).astype(np.int32), 0, 15)
+        variety = _entropy(np.bincount(ab[:, 0] * 16 + ab[:, 1], minlength=256))
+        contrast = float(fg_lab[:, 0].std() / 100.0)
+        opacity = float(dist[fg].mean())
+        lab_hist, _ = np.histogramdd(
+            fg_lab, bins=(6, 6, 6), range=((0, 100), (-100, 100), (-100, 100))
+        )
+        lab_hist = (lab_hist / lab_hist.sum()).ravel()
+        mean_lab = fg_lab.mean(axis=0)
+    else:
+        entropy = variety = contrast = opacity = 0.0
+        lab_hist = np.zeros(216)
+        mean_lab = bg_lab.copy()
+    gray128 = resize(lab[..., 0] / 100.0, (128, 128), anti_aliasing=True).astype(np.float64)
+    return _Features(
+        lab, fg, bg_lab, coverage, float(entropy), float(variety), contrast, opacity,
+        lab_hist, mean_lab, gray128,
+    )  # fmt: skip
+
+
+def _named_lab(names: Sequence[str]) -> np.ndarray:
+    rgb = np.array([NAMED_COLOURS[n] for n in names], dtype=np.float32)[None] / 255.0
+    return rgb2lab(rgb)[0]
+
+
+def named_colours(text: str) -> list[str]:
+    """The colour names in ``text`` that the judge can check, in order, without repeats."""
+    found = []
+    for m in _COLOUR_RE.finditer(text.lower()):
+        if m.group(1) not in found:
+            found.append(m.group(1))
+    return found
+
+
+def _resize_like(arr: np.ndarray, shape: tuple[int, int], order: int) -> np.ndarray:
+    if arr.shape[:2] == shape:
+        return arr
+    out = resize(arr.astype(np.float32), shape, order=order, anti_aliasing=order > 0,
+                 preserve_range=True)  # fmt: skip
+    return out
+
+
+#: Differences below these count as a tie, per measure (in the measure's own units).
+_TIE_TOLERANCE = {
+    "entropy": 0.02,  # bits
+    "variety": 0.02,  # bits
+    "contrast": 0.005,
+    "text": 0.01,
+    "ref_colour": 0.005,
+    "ref_structure": 0.002,
+    "stroke": 0.5,  # ΔE
+    "preserve": 0.5,  # ΔE
+    "edit_change": 0.005,
+}
+
+
+class MetricJudge:
+    """An offline, deterministic judge from image statistics (see the module docstring).
+
+    ``cache_size`` bounds the number of images whose features are kept (LRU).
+    """
+
+    name = "metric"
+
+    def __init__(self, cache_size: int = 256) -> None:
+        self.cache_size = int(cache_size)
+        self._cache: OrderedDict[str, _Features] = OrderedDict()
+        self.cache_hits = 0
+        self.cache_misses = 0
+
+    # ------------------------------------------------------------------ API
+
+    async def compare(
+        self,
+        first: np.ndarray,
+        second: np.ndarray,
+        aspects: Sequence[Aspect],
+        intent: Intent,
+    ) -> Verdict:
+        """Compare ``first`` and ``second`` on each aspect; unknown aspects are ties."""
+        return self.compare_sync(first, second, aspects, intent)
+
+    def compare_sync(
+        self,
+        first: np.ndarray,
+        second: np.ndarray,
+        aspects: Sequence[Aspect],
+        intent: Intent,
+    ) -> Verdict:
+        """The same as :meth:`compare`, without the event loop."""
+        t0 = time.perf_counter()
+        fa, fb = self.features(first), self.features(second)
+        per_aspect: dict[str, Choice] = {}
+        rationale: dict[str, str] = {}
+        for aspect in aspects:
+            measure = measure_for(aspect.key, intent)
+            scorer = _SCORERS.get(measure) if measure else None
+            sa = sb = None
+            if scorer is not None:
+                sa, sb = scorer(self, fa, intent), scorer(self, fb, intent)
+            if sa is None or sb is None:
+                per_aspect[aspect.key] = Choice.TIE
+                rationale[aspect.key] = f"not measurable by the metric judge ({aspect.key})"
+                continue
+            tol = _TIE_TOLERANCE.get(measure, 0.01)
+            if sa > sb + tol:
+                choice = Choice.FIRST
+            elif sb > sa + tol:
+                choice = Choice.SECOND
+            else:
+                choice = Choice.TIE
+            per_aspect[aspect.key] = choice
+            rationale[aspect.key] = f"{measure}: first {sa:.4g}, second {sb:.4g}"
+        overall, p_first = weighted_overall(per_aspect, aspects)
+        return Verdict(
+            per_aspect=per_aspect,
+            overall=overall,
+            p_first=p_first,
+            cost=Cost(seconds=time.perf_counter() - t0),
+            rationale=rationale,
+        )
+
+    def features(self, image: np.ndarray) -> _Features:
+        """Features of ``image``, from the LRU cache when the same content was seen."""
+        key = _digest(image)
+        hit = self._cache.get(key)
+        if hit is not None:
+            self._cache.move_to_end(key)
+            self.cache_hits += 1
+            return hit
+        self.cache_misses += 1
+        feats = _features(image)
+        self._cache[key] = feats
+        if len(self._cache) > self.cache_size:
+            self._cache.popitem(last=False)
+        return feats
+
+    def score(
+        self, image: np.ndarray, aspect_key: str, intent: Intent | None = None
+    ) -> float | None:
+        """The raw measure behind ``aspect_key`` for one image (None if not measurable)."""
+        intent = intent or Intent()
+        measure = measure_for(aspect_key, intent)
+        scorer = _SCORERS.get(measure) if measure else None
+        return scorer(self, self.features(image), intent) if scorer else None
+
+    # ------------------------------------------------------------ measures
+
+    def _text_score(self, f: _Features, intent: Intent) -> float | None:
+        text = (intent.text or "").lower()
+        if not text:
+            return None
+        parts = []
+        names = named_colours(text)
+        if names:
+            parts.append(_colour_presence(f, names, f.fg))
+        if _SEMI_RE.search(text):
+            parts.append(1.0 - min(1.0, abs(f.opacity - _SEMI_TARGET) / _SEMI_TARGET))
+        elif _OPAQUE_RE.search(text.replace("semi", "")):
+            parts.append(min(1.0, f.opacity / 100.0))
+        elif _TRANSPARENT_RE.search(text):
+            # Faint but present: no foreground at all is not "transparent", it is empty.
+            parts.append(0.0 if f.coverage < 0.005 else 1.0 - min(1.0, f.opacity / 100.0))
+        if _COLOURFUL_RE.search(text):
+            parts.append(min(1.0, f.variety / 6.0))
+        if _CONTRAST_RE.search(text):
+            parts.append(min(1.0, f.contrast * 3.0))
+        return float(np.mean(parts)) if parts else None
+
+    def _ref_colour(self, f: _Features, intent: Intent) -> float | None:
+        if intent.reference is None:
+            return None
+        r = self.features(intent.reference)
+        inter = float(np.minimum(f.lab_hist, r.lab_hist).sum())
+        return inter - float(np.linalg.norm(f.mean_lab - r.mean_lab)) / 100.0
+
+    def _ref_structure(self, f: _Features, intent: Intent) -> float | None:
+        if intent.reference is None:
+            return None
+        r = self.features(intent.reference)
+        return float(structural_similarity(f.gray128, r.gray128, data_range=1.0))
+
+    def _stroke(self, f: _Features, intent: Intent) -> float | None:
+        mask, stroke_lab = _strokes(intent, f.lab.shape[:2])
+        if mask is None or not mask.any():
+            return None
+        return -float(np.linalg.norm(f.lab[mask] - stroke_lab[mask], axis=1).mean())
+
+    def _preserve(self, f: _Features, intent: Intent) -> float | None:
+        if intent.base is None:
+            return None
+        base = self._base_lab(intent, f.lab.shape[:2])
+        mask, _ = _strokes(intent, f.lab.shape[:2])
+        keep = np.ones(f.lab.shape[:2], bool) if mask is None else ~mask
+        if not keep.any():
+            return None
+        return -float(np.linalg.norm(f.lab[keep] - base[keep], axis=1).mean())
+
+    def _edit_change(self, f: _Features, intent: Intent) -> float | None:
+        mask, _ = _strokes(intent, f.lab.shape[:2])
+        region = np.ones(f.lab.shape[:2], bool) if mask is None else mask
+        names = named_colours(intent.text or "")
+        if names:
+            return _colour_presence(f, names, region & f.fg if (region & f.fg).any() else region)
+        if mask is None or intent.base is None or not mask.any():
+            return None  # "change something somewhere" is not checkable
+        base = self._base_lab(intent, f.lab.shape[:2])
+        return float(np.linalg.norm(f.lab[mask] - base[mask], axis=1).mean()) / 100.0
+
+    def _base_lab(self, intent: Intent, shape: tuple[int, int]) -> np.ndarray:
+        base = self.features(intent.base).lab  # type: ignore[arg-type]
+        return _resize_like(base, shape, order=1)
+
+
+def _colour_presence(f: _Features, names: Sequence[str], region: np.ndarray) -> float:
+    """Mean over names of the (saturating) share of region pixels near each named colour."""
+    pix = f.lab[region]
+    if pix.shape[0] == 0:
+        return 0.0
+    targets = _named_lab(names)
+    shares = []
+    for t in targets:
+        near = np.linalg.norm(pix - t, axis=1) < _NAMED_DELTA_E
+        shares.append(min(1.0, near.mean() / _NAMED_SATURATION))
+    return float(np.mean(shares))
+
+
+def _strokes(intent: Intent, shape: tuple[int, int]) -> tuple[np.ndarray | None, np.ndarray]:
+    """Stroke mask (alpha > 0) and stroke colours in Lab, resized to ``shape``."""
+    sk = intent.sketch
+    if sk is None or sk.ndim != 3 or sk.shape[2] != 4:
+        return None, np.zeros(shape + (3,), np.float32)
+    alpha = _resize_like(sk[..., 3], shape, order=0) > 0
+    rgb = _resize_like(sk[..., :3], shape, order=0).astype(np.float32) / 255.0
+    return alpha, rgb2lab(rgb).astype(np.float32)
+
+
+_SCORERS: dict[str, Callable[[MetricJudge, _Features, Intent], float | None]] = {
+    "entropy": lambda j, f, i: f.entropy,
+    "variety": lambda j, f, i: f.variety + f.contrast if f.coverage > 0 else 0.0,
+    "contrast": lambda j, f, i: f.contrast,
+    "text": MetricJudge._text_score,
+    "ref_colour": MetricJudge._ref_colour,
+    "ref_structure": MetricJudge._ref_structure,
+    "stroke": MetricJudge._stroke,
+    "preserve": MetricJudge._preserve,
+    "edit_change": MetricJudge._edit_change,
+}
+
+_KNOWN_KEYS = {
+    "information_richness": "entropy",
+    "feature_discrimination": "variety",
+    "color_content_harmony": None,
+    "text_alignment": "text",
+    "color_style_matching": "ref_colour",
+    "structural_style_matching": "ref_structure",
+    "stroke_color_agreement": "stroke",
+    "unmarked_preservation": "preserve",
+    "edit_instruction_alignment": "edit_change",
+    "structure_preservation": "preserve",
+}
+
+_KEYWORDS = [
+    ("harmony", None),
+    ("aesthetic", None),
+    ("preserv", "preserve"),
+    ("stroke", "stroke"),
+    ("sketch", "stroke"),
+    ("instruction", "edit_change"),
+    ("modification", "edit_change"),
+    ("colour_style", "ref_colour"),
+    ("color_style", "ref_colour"),
+    ("structur", "ref_structure"),
+    ("richness", "entropy"),
+    ("information", "entropy"),
+    ("entropy", "entropy"),
+    ("discrimination", "variety"),
+    ("contrast", "contrast"),
+    ("text", "text"),
+]
+
+
+def measure_for(aspect_key: str, intent: Intent) -> str | None:
+    """Which measure judges ``aspect_key`` (None: the metric judge cannot, so it is a tie)."""
+    key = aspect_key.lower()
+    if key in _KNOWN_KEYS:
+        return _KNOWN_KEYS[key]
+    for word, measure in _KEYWORDS:
+        if word in key:
+            return measure
+    return None

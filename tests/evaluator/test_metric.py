@@ -1,0 +1,205 @@
+"""MetricJudge: prefers what it can measure, ties on what it cannot, deterministic and cached."""
+
+from __future__ import annotations
+
+import asyncio
+
+import numpy as np
+import pytest
+
+from intuitf.evaluator.metric import MetricJudge, measure_for, named_colours
+from intuitf.evaluator.types import Aspect, Choice, Intent, Judge
+
+S = 96
+
+
+def aspect(key: str, weight: float = 1.0) -> Aspect:
+    return Aspect(key, key, key, weight)
+
+
+QUALITY = [aspect("information_richness"), aspect("feature_discrimination")]
+
+
+def disk(radius: float, cx: float = 0.5, cy: float = 0.5) -> np.ndarray:
+    yy, xx = np.mgrid[0:S, 0:S] / S
+    return (xx - cx) ** 2 + (yy - cy) ** 2 < radius**2
+
+
+def canvas(bg=(0, 0, 0)) -> np.ndarray:
+    img = np.zeros((S, S, 3), np.uint8)
+    img[:] = bg
+    return img
+
+
+def paint(img: np.ndarray, mask: np.ndarray, rgb) -> np.ndarray:
+    out = img.copy()
+    out[mask] = rgb
+    return out
+
+
+def rich_image() -> np.ndarray:
+    """Three coloured structures with shading, on black."""
+    img = canvas()
+    yy, xx = np.mgrid[0:S, 0:S] / S
+    shade = (0.5 + 0.5 * xx)[..., None]
+    for m, rgb in [
+        (disk(0.4), (230, 220, 200)),
+        (disk(0.2, 0.4, 0.4), (200, 40, 40)),
+        (disk(0.12, 0.65, 0.6), (40, 80, 220)),
+    ]:
+        img[m] = (np.array(rgb) * shade[m]).astype(np.uint8)
+    return img
+
+
+def cmp(judge, a, b, aspects, intent=None):
+    return asyncio.run(judge.compare(a, b, aspects, intent or Intent()))
+
+
+def test_is_a_judge_and_deterministic():
+    j = MetricJudge()
+    assert isinstance(j, Judge) and j.name == "metric"
+    a, b = rich_image(), paint(canvas(), disk(0.3), (200, 200, 200))
+    v1 = cmp(j, a, b, QUALITY)
+    v2 = cmp(MetricJudge(), a, b, QUALITY)
+    assert v1.per_aspect == v2.per_aspect and v1.p_first == v2.p_first
+    assert v1.cost.calls == 0
+
+
+def test_quality_prefers_more_informative_rendering():
+    j = MetricJudge()
+    rich = rich_image()
+    flat = paint(canvas(), disk(0.4), (200, 200, 200))
+    empty = canvas()
+    v = cmp(j, rich, flat, QUALITY)
+    assert v.per_aspect["information_richness"] is Choice.FIRST
+    assert v.per_aspect["feature_discrimination"] is Choice.FIRST
+    assert v.overall is Choice.FIRST and v.p_first == 1.0
+    # Entropy sees a flat disk as no information, like an empty image; shading adds some.
+    assert j.score(empty, "information_richness") == j.score(flat, "information_richness") == 0
+    shaded = rich.copy()
+    shaded[disk(0.4)] = (rich[disk(0.4)].sum(axis=1, keepdims=True) // 3).astype(np.uint8)
+    assert cmp(j, empty, shaded, QUALITY).overall is Choice.SECOND
+    # Swapping the images swaps the verdict.
+    assert cmp(j, flat, rich, QUALITY).overall is Choice.SECOND
+    # A speck of varied colour does not beat a fully visible object.
+    speck = canvas()
+    speck[40:52, 40:52] = rich[::8, ::8]
+    assert j.features(speck).variety > j.features(shaded).variety
+    assert cmp(j, speck, shaded, [aspect("information_richness")]).overall is Choice.SECOND
+
+
+def test_background_colour_does_not_count_as_content():
+    j = MetricJudge()
+    white_bg = paint(canvas((255, 255, 255)), disk(0.3), (200, 30, 30))
+    black_bg = paint(canvas(), disk(0.3), (200, 30, 30))
+    fw, fb = j.features(white_bg), j.features(black_bg)
+    assert fw.coverage == pytest.approx(fb.coverage, abs=1e-9)
+    assert fw.entropy == pytest.approx(fb.entropy, abs=1e-9)
+
+
+def test_harmony_and_unknown_aspects_are_ties():
+    j = MetricJudge()
+    v = cmp(j, rich_image(), canvas(), [aspect("color_content_harmony"), aspect("realism")])
+    assert v.per_aspect == {"color_content_harmony": Choice.TIE, "realism": Choice.TIE}
+    assert v.overall is Choice.TIE and v.p_first == 0.5
+
+
+def test_reference_prefers_closer_colours_and_structure():
+    j = MetricJudge()
+    ref = rich_image()
+    near = np.clip(ref.astype(int) + 12, 0, 255).astype(np.uint8)
+    near[~disk(0.4)] = 0
+    far = paint(canvas(), disk(0.25, 0.3, 0.7), (40, 200, 60))
+    intent = Intent(kind="image", reference=ref)
+    aspects = [aspect("color_style_matching"), aspect("structural_style_matching")]
+    v = cmp(j, far, near, aspects, intent)
+    assert v.per_aspect == {k.key: Choice.SECOND for k in aspects}
+    # A reference of another size is resized, not refused.
+    big = np.kron(ref, np.ones((2, 2, 1), np.uint8))
+    v = cmp(j, near, far, aspects, Intent(kind="image", reference=big))
+    assert v.overall is Choice.FIRST
+
+
+def test_sketch_prefers_stroke_colours_and_preservation():
+    j = MetricJudge()
+    base = paint(paint(canvas(), disk(0.4), (220, 220, 210)), disk(0.15, 0.3, 0.3), (220, 220, 210))
+    stroke = disk(0.1, 0.6, 0.6)
+    sketch = np.zeros((S, S, 4), np.uint8)
+    sketch[stroke] = (220, 30, 30, 255)
+    good = paint(base, disk(0.14, 0.6, 0.6), (210, 40, 35))  # red under the stroke only
+    spill = paint(base, disk(0.4), (210, 40, 35))  # red everywhere
+    unchanged = base
+    intent = Intent(kind="sketch", sketch=sketch, base=base)
+    agree, keep = aspect("stroke_color_agreement", 2.0), aspect("unmarked_preservation")
+    v = cmp(j, unchanged, good, [agree, keep], intent)
+    assert v.per_aspect["stroke_color_agreement"] is Choice.SECOND
+    v = cmp(j, spill, good, [agree, keep], intent)
+    assert v.per_aspect["unmarked_preservation"] is Choice.SECOND
+    assert v.overall is Choice.SECOND
+    assert j.score(good, "stroke_color_agreement", intent) > -15.0  # mean ΔE under strokes
+
+
+def test_text_named_colours_and_opacity_words():
+    j = MetricJudge()
+    text_aspect = [aspect("text_alignment")]
+    red_blue = paint(paint(canvas(), disk(0.35), (220, 30, 30)), disk(0.15), (40, 80, 220))
+    red_only = paint(canvas(), disk(0.35), (220, 30, 30))
+    green = paint(canvas(), disk(0.35), (40, 170, 60))
+    intent = Intent(kind="text", text="A tooth with red root and blue crown")
+    assert cmp(j, red_only, red_blue, text_aspect, intent).overall is Choice.SECOND
+    assert cmp(j, red_only, green, text_aspect, intent).overall is Choice.FIRST
+    ivory = Intent(kind="text", text="opaque ivory bone")
+    bone = paint(canvas(), disk(0.35), (248, 243, 222))
+    faint_bone = paint(canvas(), disk(0.35), (70, 68, 62))
+    assert cmp(j, faint_bone, bone, text_aspect, ivory).overall is Choice.SECOND
+    faint = Intent(kind="text", text="a faint, transparent outline")
+    assert cmp(j, faint_bone, bone, text_aspect, faint).overall is Choice.FIRST
+    assert cmp(j, canvas(), faint_bone, text_aspect, faint).overall is Choice.SECOND
+    # Nothing checkable in the text: a tie.
+    style = Intent(kind="text", text="Studio Ghibli art style")
+    assert cmp(j, red_only, green, text_aspect, style).overall is Choice.TIE
+
+
+def test_named_colour_parsing():
+    assert named_colours("Bone white skull, red teeth; RED again and light blue.") == [
+        "bone white",
+        "red",
+        "light blue",
+    ]
+    assert named_colours("nothing here, not even redness") == []
+
+
+def test_edit_with_region_and_instruction():
+    j = MetricJudge()
+    base = paint(paint(canvas(), disk(0.4), (220, 220, 210)), disk(0.12, 0.6, 0.6), (200, 200, 190))
+    region = np.zeros((S, S, 4), np.uint8)
+    region[disk(0.12, 0.6, 0.6)] = (0, 0, 0, 255)
+    edited = paint(base, disk(0.12, 0.6, 0.6), (40, 80, 220))
+    wrong_place = paint(base, disk(0.12, 0.3, 0.3), (40, 80, 220))
+    aspects = [aspect("edit_instruction_alignment", 2.0), aspect("structure_preservation")]
+    intent = Intent(kind="edit", text="make it blue", base=base, sketch=region)
+    v = cmp(j, wrong_place, edited, aspects, intent)
+    assert v.per_aspect == {a.key: Choice.SECOND for a in aspects}
+    # Without a region and a colour the change is not checkable; preservation still is.
+    vague = Intent(kind="edit", text="make it nicer", base=base)
+    v = cmp(j, base, edited, aspects, vague)
+    assert v.per_aspect["edit_instruction_alignment"] is Choice.TIE
+    assert v.per_aspect["structure_preservation"] is Choice.FIRST
+
+
+def test_keyword_fallback_for_user_aspects():
+    assert measure_for("bone_structure_preservation", Intent()) == "preserve"
+    assert measure_for("my_information_score", Intent()) == "entropy"
+    assert measure_for("depth_perception", Intent()) is None
+
+
+def test_features_are_cached_by_content():
+    j = MetricJudge(cache_size=2)
+    a, b, c = rich_image(), canvas(), paint(canvas(), disk(0.2), (9, 9, 9))
+    cmp(j, a, b, QUALITY)
+    cmp(j, a.copy(), b, QUALITY)
+    assert (j.cache_hits, j.cache_misses) == (2, 2)
+    cmp(j, c, a, QUALITY)  # c evicts a (least recently used), then a evicts b
+    assert (j.cache_hits, j.cache_misses) == (2, 4)
+    cmp(j, c, a, QUALITY)
+    assert (j.cache_hits, j.cache_misses) == (4, 4) and len(j._cache) == 2
