@@ -1,0 +1,480 @@
+"""Numba kernels of the CPU ray caster. Internal: the public API is in renderer.py and cache.py.
+
+Geometry shared by every kernel:
+
+- ``cam`` is :meth:`ViewFrame.packed`: eye(3), forward(3), right(3), up(3), half width,
+  half height, perspective flag, pan x, pan y, width, height (world coordinates).
+- Rays are traversed in voxel-index space ``p_index = p_world / spacing``; the ray parameter
+  ``t`` stays in world units, so steps of ``dt`` are equal world lengths whatever the spacing.
+- The box is the voxel centres, ``[0, n - 1]`` along each axis. Samples sit at
+  ``t0 + k * dt`` from box entry ``t0`` up to the exit.
+- Compositing is front to back with premultiplied colour: ``C += T * a * c``, ``T *= 1 - a``;
+  a ray stops once its transmittance ``T`` falls below ``t_stop``.
+- Shading (Blinn–Phong, headlight, two-sided): ``c_lit = min(1, c * (ka + kd * |n.l|) +
+  ks * |n.h| ** shininess)``; where the gradient vanishes the sample counts as fully lit
+  facing the light, without highlight.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+#: int16 gradient scale: a difference of 1.0 (the whole normalised range) maps to 32767.
+GRAD_SCALE = 32767.0
+#: Gradient magnitude (normalised value per voxel) below which a sample counts as flat.
+FLAT_GRADIENT = 1e-3
+#: Cached samples are grouped in segments of 2**SEG_SHIFT for empty-space skipping.
+SEG_SHIFT = 5
+
+
+# ---------------------------------------------------------------------------------------------
+# Precomputation
+# ---------------------------------------------------------------------------------------------
+@njit(parallel=True, cache=True)
+def central_gradient(data, out):
+    """Index-space central differences of ``data`` [z, y, x] into ``out`` [z, y, x, 3] int16.
+
+    Components are (d/dx, d/dy, d/dz) scaled by GRAD_SCALE; one-sided at the borders.
+    """
+    nz, ny, nx = data.shape
+    for z in prange(nz):
+        for y in range(ny):
+            for x in range(nx):
+                if x == 0:
+                    gx = data[z, y, 1] - data[z, y, 0]
+                elif x == nx - 1:
+                    gx = data[z, y, x] - data[z, y, x - 1]
+                else:
+                    gx = 0.5 * (data[z, y, x + 1] - data[z, y, x - 1])
+                if y == 0:
+                    gy = data[z, 1, x] - data[z, 0, x]
+                elif y == ny - 1:
+                    gy = data[z, y, x] - data[z, y - 1, x]
+                else:
+                    gy = 0.5 * (data[z, y + 1, x] - data[z, y - 1, x])
+                if z == 0:
+                    gz = data[1, y, x] - data[0, y, x]
+                elif z == nz - 1:
+                    gz = data[z, y, x] - data[z - 1, y, x]
+                else:
+                    gz = 0.5 * (data[z + 1, y, x] - data[z - 1, y, x])
+                out[z, y, x, 0] = np.int16(round(gx * GRAD_SCALE))
+                out[z, y, x, 1] = np.int16(round(gy * GRAD_SCALE))
+                out[z, y, x, 2] = np.int16(round(gz * GRAD_SCALE))
+
+
+@njit(parallel=True, cache=True)
+def block_minmax(data, bsize, bmin, bmax):
+    """Min and max of the voxels each block's samples can touch (its cells plus one voxel)."""
+    nz, ny, nx = data.shape
+    nbz, nby, nbx = bmin.shape
+    for bz in prange(nbz):
+        z0 = bz * bsize
+        z1 = min(z0 + bsize, nz - 1)
+        for by in range(nby):
+            y0 = by * bsize
+            y1 = min(y0 + bsize, ny - 1)
+            for bx in range(nbx):
+                x0 = bx * bsize
+                x1 = min(x0 + bsize, nx - 1)
+                lo = np.float32(np.inf)
+                hi = np.float32(-np.inf)
+                for z in range(z0, z1 + 1):
+                    for y in range(y0, y1 + 1):
+                        for x in range(x0, x1 + 1):
+                            v = data[z, y, x]
+                            lo = min(lo, v)
+                            hi = max(hi, v)
+                bmin[bz, by, bx] = lo
+                bmax[bz, by, bx] = hi
+
+
+# ---------------------------------------------------------------------------------------------
+# Rays
+# ---------------------------------------------------------------------------------------------
+@njit(cache=True, fastmath=True, inline="always")
+def _ray(cam, i, j):
+    """World origin and unit direction of the ray through pixel (row i, column j)."""
+    x = ((j + 0.5) / cam[17] * 2.0 - 1.0 - 2.0 * cam[15]) * cam[12]
+    y = (1.0 - (i + 0.5) / cam[18] * 2.0 - 2.0 * cam[16]) * cam[13]
+    if cam[14] > 0.5:
+        dx = cam[3] + x * cam[6] + y * cam[9]
+        dy = cam[4] + x * cam[7] + y * cam[10]
+        dz = cam[5] + x * cam[8] + y * cam[11]
+        n = math.sqrt(dx * dx + dy * dy + dz * dz)
+        return cam[0], cam[1], cam[2], dx / n, dy / n, dz / n
+    ox = cam[0] + x * cam[6] + y * cam[9]
+    oy = cam[1] + x * cam[7] + y * cam[10]
+    oz = cam[2] + x * cam[8] + y * cam[11]
+    return ox, oy, oz, cam[3], cam[4], cam[5]
+
+
+@njit(cache=True, fastmath=True, inline="always")
+def _slab(o, d, hi, t0, t1):
+    if abs(d) < 1e-12:
+        if o < 0.0 or o > hi:
+            return 1.0, 0.0
+        return t0, t1
+    ta = (0.0 - o) / d
+    tb = (hi - o) / d
+    if ta > tb:
+        ta, tb = tb, ta
+    return max(t0, ta), min(t1, tb)
+
+
+@njit(cache=True, fastmath=True, inline="always")
+def _clip(oxi, oyi, ozi, dxi, dyi, dzi, nx, ny, nz):
+    """Entry and exit t of an index-space ray with the box [0, n-1]^3 (t1 < t0: missed)."""
+    t0, t1 = _slab(oxi, dxi, nx - 1.0, 0.0, 1e30)
+    t0, t1 = _slab(oyi, dyi, ny - 1.0, t0, t1)
+    t0, t1 = _slab(ozi, dzi, nz - 1.0, t0, t1)
+    return t0, t1
+
+
+@njit(cache=True, fastmath=True, inline="always")
+def _cell(p, n):
+    if p < 0.0:
+        p = 0.0
+    elif p > n - 1.0:
+        p = n - 1.0
+    i = int(p)
+    if i > n - 2:
+        i = n - 2
+    return i, p - i
+
+
+@njit(cache=True, fastmath=True, inline="always")
+def _trilinear(data, px, py, pz, nx, ny, nz):
+    i, fx = _cell(px, nx)
+    j, fy = _cell(py, ny)
+    k, fz = _cell(pz, nz)
+    c00 = data[k, j, i] * (1.0 - fx) + data[k, j, i + 1] * fx
+    c01 = data[k, j + 1, i] * (1.0 - fx) + data[k, j + 1, i + 1] * fx
+    c10 = data[k + 1, j, i] * (1.0 - fx) + data[k + 1, j, i + 1] * fx
+    c11 = data[k + 1, j + 1, i] * (1.0 - fx) + data[k + 1, j + 1, i + 1] * fx
+    c0 = c00 * (1.0 - fy) + c01 * fy
+    c1 = c10 * (1.0 - fy) + c11 * fy
+    return c0 * (1.0 - fz) + c1 * fz
+
+
+@njit(cache=True, fastmath=True, inline="always")
+def _tri_component(grad, i, j, k, fx, fy, fz, c):
+    c00 = grad[k, j, i, c] * (1.0 - fx) + grad[k, j, i + 1, c] * fx
+    c01 = grad[k, j + 1, i, c] * (1.0 - fx) + grad[k, j + 1, i + 1, c] * fx
+    c10 = grad[k + 1, j, i, c] * (1.0 - fx) + grad[k + 1, j, i + 1, c] * fx
+    c11 = grad[k + 1, j + 1, i, c] * (1.0 - fx) + grad[k + 1, j + 1, i + 1, c] * fx
+    return (c00 * (1.0 - fy) + c01 * fy) * (1.0 - fz) + (c10 * (1.0 - fy) + c11 * fy) * fz
+
+
+@njit(cache=True, fastmath=True, inline="always")
+def _shade_terms(grad, px, py, pz, nx, ny, nz, isx, isy, isz, lx, ly, lz, hx, hy, hz, shin):
+    """(|n.l|, |n.h|**shininess) at a point from the trilinear precomputed gradient."""
+    i, fx = _cell(px, nx)
+    j, fy = _cell(py, ny)
+    k, fz = _cell(pz, nz)
+    # Index-space differences divided by spacing: the world gradient (up to a common scale).
+    gx = _tri_component(grad, i, j, k, fx, fy, fz, 0) * isx
+    gy = _tri_component(grad, i, j, k, fx, fy, fz, 1) * isy
+    gz = _tri_component(grad, i, j, k, fx, fy, fz, 2) * isz
+    m = math.sqrt(gx * gx + gy * gy + gz * gz)
+    if m < FLAT_GRADIENT * GRAD_SCALE:
+        return 1.0, 0.0
+    ndl = abs(gx * lx + gy * ly + gz * lz) / m
+    ndh = abs(gx * hx + gy * hy + gz * hz) / m
+    return ndl, ndh**shin
+
+
+@njit(cache=True, fastmath=True, inline="always")
+def _half_vector(lx, ly, lz, dx, dy, dz):
+    hx = lx - dx
+    hy = ly - dy
+    hz = lz - dz
+    n = math.sqrt(hx * hx + hy * hy + hz * hz)
+    if n < 1e-12:
+        return lx, ly, lz
+    return hx / n, hy / n, hz / n
+
+
+# ---------------------------------------------------------------------------------------------
+# Direct ray marcher
+# ---------------------------------------------------------------------------------------------
+@njit(parallel=True, cache=True, fastmath=True)
+def march(
+    data, grad, shading, vis, bsize, lut, cam, spacing, dt, shade_params, t_stop, out
+):
+    """Render every pixel of ``cam`` into ``out`` (n_pixels, 4) premultiplied RGBA.
+
+    Post-classification: the trilinear value indexes ``lut`` (L, 4 straight RGBA, alpha already
+    corrected for ``dt``) with linear interpolation between entries. ``vis`` marks blocks of
+    ``bsize`` cells whose values can have non-zero alpha; rays jump over the others, keeping
+    the sample grid, so skipping changes no pixel.
+    """
+    nz, ny, nx = data.shape
+    nbz, nby, nbx = vis.shape
+    width = int(cam[17])
+    height = int(cam[18])
+    nl = lut.shape[0]
+    scale = nl - 1.0
+    isx = 1.0 / spacing[0]
+    isy = 1.0 / spacing[1]
+    isz = 1.0 / spacing[2]
+    ka, kd, ks, shin = shade_params[0], shade_params[1], shade_params[2], shade_params[3]
+    lx, ly, lz = -cam[3], -cam[4], -cam[5]
+    for i in prange(height):
+        for j in range(width):
+            ox, oy, oz, dx, dy, dz = _ray(cam, i, j)
+            oxi, oyi, ozi = ox * isx, oy * isy, oz * isz
+            dxi, dyi, dzi = dx * isx, dy * isy, dz * isz
+            t0, t1 = _clip(oxi, oyi, ozi, dxi, dyi, dzi, nx, ny, nz)
+            hx, hy, hz = _half_vector(lx, ly, lz, dx, dy, dz)
+            r = 0.0
+            g = 0.0
+            b = 0.0
+            tr = 1.0
+            if t1 >= t0:
+                n = int((t1 - t0) / dt) + 1
+                k = 0
+                while k < n:
+                    t = t0 + k * dt
+                    px = oxi + t * dxi
+                    py = oyi + t * dyi
+                    pz = ozi + t * dzi
+                    bx = min(max(int(px), 0) // bsize, nbx - 1)
+                    by = min(max(int(py), 0) // bsize, nby - 1)
+                    bz = min(max(int(pz), 0) // bsize, nbz - 1)
+                    if vis[bz, by, bx] == 0:
+                        # Jump to the first sample at or after the block's exit.
+                        tex = 1e30
+                        if dxi > 1e-12:
+                            tex = min(tex, ((bx + 1) * bsize - oxi) / dxi)
+                        elif dxi < -1e-12:
+                            tex = min(tex, (bx * bsize - oxi) / dxi)
+                        if dyi > 1e-12:
+                            tex = min(tex, ((by + 1) * bsize - oyi) / dyi)
+                        elif dyi < -1e-12:
+                            tex = min(tex, (by * bsize - oyi) / dyi)
+                        if dzi > 1e-12:
+                            tex = min(tex, ((bz + 1) * bsize - ozi) / dzi)
+                        elif dzi < -1e-12:
+                            tex = min(tex, (bz * bsize - ozi) / dzi)
+                        kn = int(math.ceil((tex - t0) / dt - 1e-4))
+                        k = kn if kn > k else k + 1
+                        continue
+                    v = _trilinear(data, px, py, pz, nx, ny, nz)
+                    x = v * scale
+                    q = int(x)
+                    if q > nl - 2:
+                        q = nl - 2
+                    elif q < 0:
+                        q = 0
+                    f = x - q
+                    a = lut[q, 3] * (1.0 - f) + lut[q + 1, 3] * f
+                    if a > 0.0:
+                        cr = lut[q, 0] * (1.0 - f) + lut[q + 1, 0] * f
+                        cg = lut[q, 1] * (1.0 - f) + lut[q + 1, 1] * f
+                        cb = lut[q, 2] * (1.0 - f) + lut[q + 1, 2] * f
+                        if shading:
+                            ndl, sp = _shade_terms(
+                                grad, px, py, pz, nx, ny, nz, isx, isy, isz,
+                                lx, ly, lz, hx, hy, hz, shin,
+                            )  # fmt: skip
+                            lit = ka + kd * ndl
+                            cr = min(1.0, cr * lit + ks * sp)
+                            cg = min(1.0, cg * lit + ks * sp)
+                            cb = min(1.0, cb * lit + ks * sp)
+                        w = tr * a
+                        r += w * cr
+                        g += w * cg
+                        b += w * cb
+                        tr *= 1.0 - a
+                        if tr < t_stop:
+                            break
+                    k += 1
+            p = i * width + j
+            out[p, 0] = r
+            out[p, 1] = g
+            out[p, 2] = b
+            out[p, 3] = 1.0 - tr
+
+
+# ---------------------------------------------------------------------------------------------
+# Sample cache
+# ---------------------------------------------------------------------------------------------
+@njit(parallel=True, cache=True, fastmath=True)
+def count_samples(cam, spacing, dims, dt, counts):
+    """Number of samples on each pixel's ray (``counts`` has one entry per pixel)."""
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    width = int(cam[17])
+    height = int(cam[18])
+    isx = 1.0 / spacing[0]
+    isy = 1.0 / spacing[1]
+    isz = 1.0 / spacing[2]
+    for i in prange(height):
+        for j in range(width):
+            ox, oy, oz, dx, dy, dz = _ray(cam, i, j)
+            t0, t1 = _clip(ox * isx, oy * isy, oz * isz, dx * isx, dy * isy, dz * isz, nx, ny, nz)
+            counts[i * width + j] = int((t1 - t0) / dt) + 1 if t1 >= t0 else 0
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def fill_samples(
+    data, grad, shading, cam, spacing, dt, nl, shin, offsets, samples, diffuse, specular
+):
+    """Sample every ray (same positions as :func:`march`) and store quantised values.
+
+    ``samples[k] = round(v * (nl - 1))``; with shading, ``diffuse[k] = round(255 * |n.l|)`` and
+    ``specular[k] = round(255 * |n.h| ** shininess)``.
+    """
+    nz, ny, nx = data.shape
+    width = int(cam[17])
+    height = int(cam[18])
+    scale = nl - 1.0
+    isx = 1.0 / spacing[0]
+    isy = 1.0 / spacing[1]
+    isz = 1.0 / spacing[2]
+    lx, ly, lz = -cam[3], -cam[4], -cam[5]
+    for i in prange(height):
+        for j in range(width):
+            ox, oy, oz, dx, dy, dz = _ray(cam, i, j)
+            oxi, oyi, ozi = ox * isx, oy * isy, oz * isz
+            dxi, dyi, dzi = dx * isx, dy * isy, dz * isz
+            t0, t1 = _clip(oxi, oyi, ozi, dxi, dyi, dzi, nx, ny, nz)
+            hx, hy, hz = _half_vector(lx, ly, lz, dx, dy, dz)
+            p = i * width + j
+            s0 = offsets[p]
+            for k in range(offsets[p + 1] - s0):
+                t = t0 + k * dt
+                px = oxi + t * dxi
+                py = oyi + t * dyi
+                pz = ozi + t * dzi
+                v = _trilinear(data, px, py, pz, nx, ny, nz)
+                samples[s0 + k] = int(v * scale + 0.5)
+                if shading:
+                    ndl, sp = _shade_terms(
+                        grad, px, py, pz, nx, ny, nz, isx, isy, isz, lx, ly, lz, hx, hy, hz, shin
+                    )
+                    diffuse[s0 + k] = np.uint8(int(ndl * 255.0 + 0.5))
+                    specular[s0 + k] = np.uint8(int(sp * 255.0 + 0.5))
+
+
+@njit(parallel=True, cache=True)
+def segment_minmax(samples, segmin, segmax):
+    """Min and max quantised value of each run of 2**SEG_SHIFT consecutive samples."""
+    n = samples.shape[0]
+    seg = 1 << SEG_SHIFT
+    for g in prange(segmin.shape[0]):
+        a = g * seg
+        b = min(a + seg, n)
+        lo = samples[a]
+        hi = samples[a]
+        for k in range(a + 1, b):
+            v = samples[k]
+            if v < lo:
+                lo = v
+            if v > hi:
+                hi = v
+        segmin[g] = lo
+        segmax[g] = hi
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def composite(
+    offsets, samples, diffuse, specular, shading, segmin, segmax, occupied, lut, shade_params,
+    t_stop, out,
+):  # fmt: skip
+    """Render one TF from a sample cache into ``out`` (n_rays, 4) premultiplied RGBA.
+
+    ``occupied[k]`` counts LUT entries below k with non-zero alpha, so a segment whose values
+    lie in [lo, hi] is empty when ``occupied[hi + 1] == occupied[lo]`` and is skipped whole.
+    """
+    ka, kd, ks = shade_params[0], shade_params[1], shade_params[2]
+    inv = 1.0 / 255.0
+    for p in prange(offsets.shape[0] - 1):
+        s0 = offsets[p]
+        s1 = offsets[p + 1]
+        r = 0.0
+        g = 0.0
+        b = 0.0
+        tr = 1.0
+        k = s0
+        done = False
+        while k < s1 and not done:
+            seg = k >> SEG_SHIFT
+            e = min((seg + 1) << SEG_SHIFT, s1)
+            if occupied[np.int64(segmax[seg]) + 1] == occupied[np.int64(segmin[seg])]:
+                k = e
+                continue
+            for kk in range(k, e):
+                q = samples[kk]
+                a = lut[q, 3]
+                if a > 0.0:
+                    cr = lut[q, 0]
+                    cg = lut[q, 1]
+                    cb = lut[q, 2]
+                    if shading:
+                        lit = ka + kd * (diffuse[kk] * inv)
+                        sp = ks * (specular[kk] * inv)
+                        cr = min(1.0, cr * lit + sp)
+                        cg = min(1.0, cg * lit + sp)
+                        cb = min(1.0, cb * lit + sp)
+                    w = tr * a
+                    r += w * cr
+                    g += w * cg
+                    b += w * cb
+                    tr *= 1.0 - a
+                    if tr < t_stop:
+                        done = True
+                        break
+            k = e
+        out[p, 0] = r
+        out[p, 1] = g
+        out[p, 2] = b
+        out[p, 3] = 1.0 - tr
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def attribute(offsets, samples, segmin, segmax, occupied, alpha, share, t_stop, out):
+    """Each Gaussian's part of every ray's accumulated opacity, into ``out`` (n_rays, N).
+
+    At each sample the composited opacity ``T * a`` is split in proportion to ``share``
+    (L, N): the Gaussians' opacity densities at that value, normalised to sum to one.
+    The parts of a ray therefore sum to its alpha (up to float rounding).
+    """
+    ng = share.shape[1]
+    for p in prange(offsets.shape[0] - 1):
+        s0 = offsets[p]
+        s1 = offsets[p + 1]
+        tr = 1.0
+        k = s0
+        done = False
+        while k < s1 and not done:
+            seg = k >> SEG_SHIFT
+            e = min((seg + 1) << SEG_SHIFT, s1)
+            if occupied[np.int64(segmax[seg]) + 1] == occupied[np.int64(segmin[seg])]:
+                k = e
+                continue
+            for kk in range(k, e):
+                q = samples[kk]
+                a = alpha[q]
+                if a > 0.0:
+                    w = tr * a
+                    for c in range(ng):
+                        out[p, c] += w * share[q, c]
+                    tr *= 1.0 - a
+                    if tr < t_stop:
+                        done = True
+                        break
+            k = e
+
+
+@njit(parallel=True, cache=True)
+def to_rgb8(rgba, background, out):
+    """Composite premultiplied ``rgba`` (n, 4) over ``background`` into uint8 ``out`` (n, 3)."""
+    for p in prange(rgba.shape[0]):
+        t = 1.0 - rgba[p, 3]
+        for c in range(3):
+            v = (rgba[p, c] + t * background[c]) * 255.0 + 0.5
+            out[p, c] = np.uint8(min(255.0, max(0.0, v)))
