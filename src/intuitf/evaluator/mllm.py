@@ -1,0 +1,519 @@
+"""MLLMJudge: a multimodal model compares two renderings over the OpenAI chat-completions protocol.
+
+One ``AsyncOpenAI`` client per judge (per event loop) reaches OpenAI, Gemini, Ollama, vLLM, LM
+Studio, OpenRouter or any compatible server. The SDK's own retries are off; this module retries
+with exponential backoff and jitter, honouring ``Retry-After``.
+
+**Failure rule.** A comparison becomes a *logged tie* (``Verdict.error`` set, not cached) when
+the server answered but the answer is unusable: a refusal, "cannot see the image", or text with
+no readable choice. It raises :class:`~intuitf.errors.JudgeError` when the server gives no answer
+after ``max_retries`` retries (unreachable, timeouts, 429 or 5xx every time) or rejects the
+request itself (bad key, unknown model): a session should then stop, keep what it has (every
+paid answer is already in the cache) and resume later. :class:`~intuitf.errors.BudgetExhausted`
+is raised *before* a call that would go past the budget.
+
+**Swap debiasing** (``swap``):
+
+- ``"always"``: ask in both orders (concurrently); per aspect, the two answers are averaged, so
+  opposite answers make a tie and a decisive answer plus a tie leans to the decisive side.
+- ``"never"``: one call, in the order given.
+- ``"auto"``: one call, in an order fixed by the two images' content (not by the order the
+  caller passes them), so a model's position bias falls at random on either candidate instead of
+  systematically favouring the one a tournament lists first; the swapped order is asked only when
+  the first answer leaves the overall preference undecided (a tie or an unusable answer). About
+  half the cost of "always"; position bias becomes noise rather than a systematic error.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import email.utils
+import hashlib
+import logging
+import random
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+import openai
+from openai import AsyncOpenAI
+
+from intuitf.errors import JudgeError
+from intuitf.evaluator.budget import Budget
+from intuitf.evaluator.cache import VerdictCache, request_key
+from intuitf.evaluator.compose import ImageFormat, Layout, comparison_images, content_parts
+from intuitf.evaluator.parsing import UnreadableAnswer, parse_answer
+from intuitf.evaluator.pricing import PriceTable
+from intuitf.evaluator.prompts import SYSTEM_PROMPT, response_format, user_prompt
+from intuitf.evaluator.providers import CUSTOM, ProviderPreset, preset, require_api_key
+from intuitf.evaluator.types import Aspect, Choice, Cost, Intent, Verdict
+
+log = logging.getLogger(__name__)
+
+SwapMode = Literal["always", "never", "auto"]
+
+#: Bump when the prompt or the cached payload changes meaning, so old answers are not reused.
+PROMPT_VERSION = "intuitf-compare-1"
+
+#: HTTP statuses worth retrying: timeouts, conflicts, rate limits, server trouble.
+_RETRYABLE = {408, 409, 425, 429, 500, 502, 503, 504, 520, 522, 524, 529}
+
+#: Rough tokens per image part, for a budget estimate before the first priced answer.
+_IMAGE_TOKENS_GUESS = 800
+
+
+@dataclass
+class _OrderResult:
+    """One call's outcome, in the caller's orientation (first = caller's first image)."""
+
+    per_aspect: dict[str, Choice]
+    rationale: dict[str, str] = field(default_factory=dict)
+    cost: Cost = field(default_factory=Cost)
+    error: str | None = None
+    cached: bool = False
+
+
+class MLLMJudge:
+    """A :class:`~intuitf.evaluator.types.Judge` backed by an OpenAI-compatible multimodal model.
+
+    ``model`` defaults to the provider's default model; ``provider`` is one of
+    :data:`~intuitf.evaluator.providers.PROVIDERS` (default "openai" unless ``base_url`` is given,
+    which works for any compatible server). ``compose`` lays the images out as separate parts or
+    side by side; ``image_format`` is "png" or "jpeg" (quality ``jpeg_quality``). ``structured``
+    asks for JSON-schema output and falls back to plain text, for the rest of this judge's life,
+    when the server rejects it. The API key comes from ``api_key``, the provider's environment
+    variable or the config file, and is never shown.
+    """
+
+    def __init__(
+        self,
+        model: str | None = None,
+        *,
+        base_url: str | None = None,
+        api_key: str | None = None,
+        provider: str | None = None,
+        swap: SwapMode = "always",
+        compose: Layout = "parts",
+        image_format: ImageFormat = "png",
+        jpeg_quality: int = 90,
+        max_concurrency: int = 32,
+        timeout: float = 60.0,
+        max_retries: int = 4,
+        cache: VerdictCache | None = None,
+        budget: Budget | None = None,
+        prices: PriceTable | None = None,
+        temperature: float = 0.0,
+        structured: bool = True,
+        max_tokens: int = 2048,
+        backoff_base: float = 0.5,
+        backoff_max: float = 30.0,
+        name: str | None = None,
+    ) -> None:
+        if swap not in ("always", "never", "auto"):
+            raise JudgeError(f"Unknown swap mode {swap!r}.", "Use 'always', 'never' or 'auto'.")
+        if compose not in ("parts", "side_by_side"):
+            raise JudgeError(f"Unknown image layout {compose!r}.", "Use 'parts' or 'side_by_side'.")
+        if image_format not in ("png", "jpeg"):
+            raise JudgeError(f"Unknown image format {image_format!r}.", "Use 'png' or 'jpeg'.")
+        if max_concurrency < 1 or timeout <= 0 or max_retries < 0:
+            raise JudgeError(
+                "max_concurrency must be ≥ 1, timeout > 0 and max_retries ≥ 0.",
+                "Check the judge options.",
+            )
+        p: ProviderPreset = (
+            preset(provider) if provider else (CUSTOM if base_url else preset("openai"))
+        )
+        self.provider = p.name
+        self.model = model or p.default_model
+        self.base_url = (base_url or p.base_url).rstrip("/") + "/"
+        self.name = name or f"{p.name}:{self.model}"
+        self._api_key = require_api_key(p, api_key)
+        self.swap: SwapMode = swap
+        self.compose: Layout = compose
+        self.image_format: ImageFormat = image_format
+        self.jpeg_quality = int(jpeg_quality)
+        self.max_concurrency = int(max_concurrency)
+        self.timeout = float(timeout)
+        self.max_retries = int(max_retries)
+        self.cache = cache
+        self.budget = budget
+        self.prices = prices or PriceTable()
+        self.temperature = float(temperature)
+        self.max_tokens = int(max_tokens)
+        self.backoff_base = float(backoff_base)
+        self.backoff_max = float(backoff_max)
+        self.structured = bool(structured) and p.structured
+        #: Running total of everything this judge spent (and served from cache).
+        self.cost = Cost()
+        self._client: AsyncOpenAI | None = None
+        self._sem: asyncio.Semaphore | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._rng = random.Random()
+
+    def __repr__(self) -> str:
+        return (
+            f"MLLMJudge(name={self.name!r}, base_url={self.base_url!r}, swap={self.swap!r}, "
+            f"compose={self.compose!r}, max_concurrency={self.max_concurrency})"
+        )
+
+    # -- plumbing -----------------------------------------------------------------------------
+
+    def _session(self) -> tuple[AsyncOpenAI, asyncio.Semaphore]:
+        """The client and semaphore of the running event loop (both are bound to a loop)."""
+        loop = asyncio.get_running_loop()
+        if self._loop is not loop or self._client is None or self._sem is None:
+            self._client = AsyncOpenAI(
+                api_key=self._api_key, base_url=self.base_url, max_retries=0, timeout=self.timeout
+            )
+            self._sem = asyncio.Semaphore(self.max_concurrency)
+            self._loop = loop
+        return self._client, self._sem
+
+    async def aclose(self) -> None:
+        """Close the HTTP client (optional; it is also dropped with the judge)."""
+        if self._client is not None:
+            await self._client.close()
+            self._client = None
+
+    def _redact(self, text: str) -> str:
+        key = self._api_key
+        if key and len(key) >= 4:
+            text = text.replace(key, "***")
+        return text
+
+    def _backoff(self, attempt: int, retry_after: float | None) -> float:
+        if retry_after is not None:
+            # Honour the server's wish, plus a little jitter so waiting clients do not stampede.
+            return min(retry_after, max(self.backoff_max, 60.0)) * (1.0 + 0.1 * self._rng.random())
+        d = min(self.backoff_max, self.backoff_base * 2**attempt)
+        return d / 2 + self._rng.uniform(0, d / 2)
+
+    # -- one call -----------------------------------------------------------------------------
+
+    def _estimate_usd(self, prompt: str, n_images: int) -> float:
+        tokens_in = len(prompt) // 4 + n_images * _IMAGE_TOKENS_GUESS
+        return self.prices.cost(self.model, tokens_in, 300)
+
+    async def _complete(
+        self, messages: list[dict], schema: dict, estimate: float
+    ) -> tuple[Any, Cost]:
+        """One answered call (with retries); JudgeError when the server never answers."""
+        client, sem = self._session()
+        cost = Cost()
+        last = "no attempt"
+        attempt = 0
+        while attempt <= self.max_retries:
+            kwargs: dict[str, Any] = {
+                "model": self.model,
+                "messages": messages,
+                "temperature": self.temperature,
+                "max_tokens": self.max_tokens,
+            }
+            structured = self.structured
+            if structured:
+                kwargs["response_format"] = schema
+            reserved = self.budget.reserve(estimate) if self.budget is not None else 0.0
+            t0 = time.perf_counter()
+            try:
+                async with sem:
+                    t0 = time.perf_counter()
+                    resp = await client.chat.completions.create(**kwargs)
+            except openai.APIStatusError as exc:
+                if self.budget is not None:
+                    self.budget.release(reserved)
+                cost.seconds += time.perf_counter() - t0
+                status = exc.status_code
+                if structured and status in (400, 415, 422):
+                    # The server does not take a JSON schema: ask in plain text from now on.
+                    log.info(
+                        "%s: structured output rejected (HTTP %s); using plain text.",
+                        self.name,
+                        status,
+                    )
+                    self.structured = False
+                    continue
+                cost.failed_calls += 1
+                if status not in _RETRYABLE:
+                    raise JudgeError(
+                        f"The model server for {self.name} rejected the request (HTTP {status}): "
+                        f"{self._redact(_short(exc))}",
+                        _hint_for_status(status, self.provider),
+                    ) from None
+                last = f"HTTP {status}"
+                wait = self._backoff(attempt, _retry_after(exc.response))
+            except (openai.APITimeoutError, openai.APIConnectionError) as exc:
+                if self.budget is not None:
+                    self.budget.release(reserved)
+                cost.seconds += time.perf_counter() - t0
+                cost.failed_calls += 1
+                last = (
+                    "timed out" if isinstance(exc, openai.APITimeoutError) else "connection failed"
+                )
+                wait = self._backoff(attempt, None)
+            else:
+                cost.seconds += time.perf_counter() - t0
+                tin, tout = _usage(resp)
+                usd = self.prices.cost(self.model, tin, tout)
+                if self.budget is not None:
+                    self.budget.settle(reserved, usd)
+                cost.calls += 1
+                cost.input_tokens += tin
+                cost.output_tokens += tout
+                cost.usd += usd
+                return resp, cost
+            attempt += 1
+            if attempt > self.max_retries:
+                break
+            log.warning(
+                "%s: call failed (%s), retry %d of %d in %.2f s.",
+                self.name,
+                last,
+                attempt,
+                self.max_retries,
+                wait,
+            )
+            await asyncio.sleep(wait)
+        self.cost += cost
+        raise JudgeError(
+            f"The model server for {self.name} at {self.base_url} gave no answer after "
+            f"{self.max_retries + 1} attempts (last: {last}).",
+            "Check that the server is running and reachable, then resume the run: every answer "
+            "received so far is kept in the verdict cache.",
+        )
+
+    async def _ask(
+        self,
+        shown_first: np.ndarray,
+        shown_second: np.ndarray,
+        aspects: Sequence[Aspect],
+        intent: Intent,
+        swapped: bool,
+    ) -> _OrderResult:
+        """Ask about the images in the order shown; report in the caller's orientation."""
+        prompt = user_prompt(aspects, intent, self.compose)
+        images = comparison_images(shown_first, shown_second, intent, self.compose)
+        key = request_key(
+            self.name,
+            [
+                PROMPT_VERSION,
+                SYSTEM_PROMPT,
+                prompt,
+                f"{self.compose}|{self.image_format}|{self.jpeg_quality}|t={self.temperature}",
+                intent.fingerprint(),
+                *(x for im in images for x in (im.label, im.image)),
+            ],
+        )
+
+        def orient(per: dict[str, Choice]) -> dict[str, Choice]:
+            return {k: (c.swapped() if swapped else c) for k, c in per.items()}
+
+        if self.cache is not None:
+            hit = self.cache.get(key)
+            if hit is not None:
+                return _OrderResult(
+                    per_aspect=orient({k: Choice(v) for k, v in hit["per_aspect"].items()}),
+                    rationale=dict(hit.get("rationale", {})),
+                    cost=Cost(cached_calls=1),
+                    cached=True,
+                )
+        messages = [
+            {"role": "system", "content": SYSTEM_PROMPT},
+            {
+                "role": "user",
+                "content": [{"type": "text", "text": prompt}]
+                + content_parts(images, self.image_format, self.jpeg_quality),
+            },
+        ]
+        estimate = self._estimate_usd(prompt, len(images))
+        resp, cost = await self._complete(messages, response_format(aspects, intent), estimate)
+        text, refusal, finish = _message(resp)
+        try:
+            if refusal:
+                raise UnreadableAnswer("refusal", refusal)
+            if finish == "content_filter" and not text:
+                raise UnreadableAnswer("refusal", "blocked by the server's content filter")
+            parsed = parse_answer(text, aspects)
+        except UnreadableAnswer as exc:
+            msg = f"{exc.reason}: {self._redact(exc.detail)[:160]}"
+            log.warning("%s: unusable answer counted as a tie (%s).", self.name, msg)
+            return _OrderResult(
+                per_aspect={a.key: Choice.TIE for a in aspects}, cost=cost, error=msg
+            )
+        rationale = dict(parsed.rationale)
+        if parsed.reference_description:
+            rationale["reference_description"] = parsed.reference_description
+        if self.cache is not None:
+            self.cache.put(
+                key,
+                self.name,
+                {
+                    "per_aspect": {k: c.value for k, c in parsed.per_aspect.items()},
+                    "rationale": rationale,
+                    "missing": parsed.missing,
+                    "input_tokens": cost.input_tokens,
+                    "output_tokens": cost.output_tokens,
+                    "usd": cost.usd,
+                },
+            )
+        return _OrderResult(orient(parsed.per_aspect), rationale, cost)
+
+    # -- the Judge protocol -------------------------------------------------------------------
+
+    async def compare(
+        self,
+        first: np.ndarray,
+        second: np.ndarray,
+        aspects: Sequence[Aspect],
+        intent: Intent,
+    ) -> Verdict:
+        """Compare ``first`` and ``second`` (uint8 RGB) on ``aspects`` under ``intent``."""
+        aspects = list(aspects)
+        if not aspects:
+            raise JudgeError("No aspects to judge on.", "Pass at least one Aspect.")
+        if self.swap == "never":
+            results = await self._gather([(first, second, False)], aspects, intent)
+        elif self.swap == "always":
+            results = await self._gather(
+                [(first, second, False), (second, first, True)], aspects, intent
+            )
+        else:
+            swapped = _content_order(first, second)
+            order = (second, first, True) if swapped else (first, second, False)
+            results = await self._gather([order], aspects, intent)
+            r = results[0]
+            if r.error is not None or _combine([r], aspects)[0] is Choice.TIE:
+                other = (first, second, False) if swapped else (second, first, True)
+                results += await self._gather([other], aspects, intent)
+        return self._verdict(results, aspects)
+
+    async def _gather(
+        self, orders: list[tuple], aspects: list[Aspect], intent: Intent
+    ) -> list[_OrderResult]:
+        # Let every call finish (paid answers reach the cache) before an error propagates.
+        out = await asyncio.gather(
+            *(self._ask(a, b, aspects, intent, s) for a, b, s in orders), return_exceptions=True
+        )
+        for r in out:
+            if isinstance(r, _OrderResult):
+                self.cost += r.cost
+        for r in out:
+            if isinstance(r, BaseException):
+                raise r
+        return list(out)  # type: ignore[arg-type]
+
+    def _verdict(self, results: list[_OrderResult], aspects: list[Aspect]) -> Verdict:
+        cost = Cost()
+        for r in results:
+            cost += r.cost
+        valid = [r for r in results if r.error is None]
+        if not valid:
+            return Verdict(
+                per_aspect={a.key: Choice.TIE for a in aspects},
+                overall=Choice.TIE,
+                p_first=0.5,
+                cost=cost,
+                error="; ".join(r.error or "" for r in results),
+            )
+        overall, p, per = _combine(valid, aspects)
+        rationale: dict[str, str] = {}
+        for k in {k for r in valid for k in r.rationale}:
+            texts = [r.rationale[k] for r in valid if r.rationale.get(k)]
+            rationale[k] = (
+                texts[0]
+                if len(texts) == 1
+                else " | ".join(f"(order {i + 1}) {t}" for i, t in enumerate(texts))
+            )
+        return Verdict(
+            per_aspect=per,
+            overall=overall,
+            p_first=p,
+            cost=cost,
+            rationale=rationale,
+            cached=all(r.cached for r in results),
+        )
+
+
+def _combine(
+    results: list[_OrderResult], aspects: list[Aspect]
+) -> tuple[Choice, float, dict[str, Choice]]:
+    """Average the answers per aspect, then weight aspects into P(first better) and a choice."""
+    per: dict[str, Choice] = {}
+    p_num = 0.0
+    w_sum = 0.0
+    for a in aspects:
+        s = sum(r.per_aspect.get(a.key, Choice.TIE).score for r in results) / len(results)
+        per[a.key] = (
+            Choice.FIRST if s > 0.5 + 1e-9 else Choice.SECOND if s < 0.5 - 1e-9 else Choice.TIE
+        )
+        p_num += a.weight * s
+        w_sum += a.weight
+    p = p_num / w_sum if w_sum else 0.5
+    overall = Choice.FIRST if p > 0.5 + 1e-9 else Choice.SECOND if p < 0.5 - 1e-9 else Choice.TIE
+    return overall, (p if overall is not Choice.TIE else 0.5), per
+
+
+def _content_order(first: np.ndarray, second: np.ndarray) -> bool:
+    """Whether "auto" shows ``second`` first: decided by content, the same for (a, b) and (b, a)."""
+    da = hashlib.sha256(np.ascontiguousarray(first).tobytes()).digest()
+    db = hashlib.sha256(np.ascontiguousarray(second).tobytes()).digest()
+    return db < da
+
+
+def _usage(resp: Any) -> tuple[int, int]:
+    u = getattr(resp, "usage", None)
+    if u is None:
+        return 0, 0
+    return int(getattr(u, "prompt_tokens", 0) or 0), int(getattr(u, "completion_tokens", 0) or 0)
+
+
+def _message(resp: Any) -> tuple[str | None, str | None, str | None]:
+    choices = getattr(resp, "choices", None) or []
+    if not choices:
+        return None, None, None
+    msg = choices[0].message
+    return getattr(msg, "content", None), getattr(msg, "refusal", None), choices[0].finish_reason
+
+
+def _retry_after(response: Any) -> float | None:
+    """Seconds to wait from ``retry-after-ms`` or ``Retry-After`` (seconds or an HTTP date)."""
+    headers = getattr(response, "headers", None)
+    if headers is None:
+        return None
+    ms = headers.get("retry-after-ms")
+    if ms:
+        try:
+            return max(0.0, float(ms) / 1000.0)
+        except ValueError:
+            pass
+    ra = headers.get("retry-after")
+    if not ra:
+        return None
+    try:
+        return max(0.0, float(ra))
+    except ValueError:
+        pass
+    try:
+        when = email.utils.parsedate_to_datetime(ra)
+    except (TypeError, ValueError):
+        return None
+    return max(0.0, when.timestamp() - time.time())
+
+
+def _short(exc: openai.APIStatusError) -> str:
+    body = getattr(exc, "body", None)
+    if isinstance(body, dict):
+        err = body.get("error", body)
+        msg = err.get("message") if isinstance(err, dict) else None
+        if msg:
+            return str(msg)[:200]
+    return str(exc.message)[:200]
+
+
+def _hint_for_status(status: int, provider: str) -> str:
+    if status in (401, 403):
+        return f"Check the API key for {provider} (environment variable or config file)."
+    if status == 404:
+        return "Check the model name and the server's base URL."
+    return "Check the judge's options and the server's documentation; then resume the run."

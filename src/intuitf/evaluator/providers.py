@@ -1,0 +1,138 @@
+"""Where OpenAI-compatible multimodal models live: provider presets and API-key lookup.
+
+Every provider here speaks the chat-completions protocol, so one client reaches all of them with
+a base URL and a model name. A key is looked up, in order: the explicit argument, the provider's
+environment variable(s), then ``[api_keys]`` in the config file
+(``$INTUITF_CONFIG`` or ``~/.config/intuitf/config.toml``)::
+
+    [api_keys]
+    openai = "sk-..."
+    gemini = "..."
+
+Keys are never logged, printed, stored or put in error messages.
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from intuitf.errors import JudgeError
+
+#: Sent to local servers that ignore keys (the SDK refuses to run without one).
+NO_KEY = "no-key-needed"
+
+
+@dataclass(frozen=True)
+class ProviderPreset:
+    """A provider's endpoint, where its key comes from, and the model used when none is named."""
+
+    name: str
+    base_url: str
+    key_env: tuple[str, ...]
+    default_model: str
+    needs_key: bool = True
+    #: Whether the server is known to accept ``response_format`` with a JSON schema.
+    structured: bool = True
+
+
+PROVIDERS: dict[str, ProviderPreset] = {
+    p.name: p
+    for p in (
+        ProviderPreset("openai", "https://api.openai.com/v1", ("OPENAI_API_KEY",), "gpt-4o"),
+        ProviderPreset(
+            "gemini",
+            "https://generativelanguage.googleapis.com/v1beta/openai/",
+            ("GEMINI_API_KEY", "GOOGLE_API_KEY"),
+            "gemini-2.0-flash",
+        ),
+        ProviderPreset(
+            "ollama",
+            "http://localhost:11434/v1",
+            ("OLLAMA_API_KEY",),
+            "qwen2.5vl:7b",
+            needs_key=False,
+        ),
+        ProviderPreset(
+            "vllm",
+            "http://localhost:8000/v1",
+            ("VLLM_API_KEY",),
+            "Qwen/Qwen2.5-VL-7B-Instruct",
+            needs_key=False,
+        ),
+        ProviderPreset(
+            "lmstudio",
+            "http://localhost:1234/v1",
+            ("LMSTUDIO_API_KEY",),
+            "default",
+            needs_key=False,
+        ),
+        ProviderPreset(
+            "openrouter", "https://openrouter.ai/api/v1", ("OPENROUTER_API_KEY",), "openai/gpt-4o"
+        ),
+    )
+}
+
+#: The preset for a server given only by its URL.
+CUSTOM = ProviderPreset("url", "", ("INTUITF_API_KEY",), "default", needs_key=False)
+
+
+def preset(name: str) -> ProviderPreset:
+    """The preset named ``name``; :class:`JudgeError` if there is none."""
+    try:
+        return PROVIDERS[name]
+    except KeyError:
+        raise JudgeError(
+            f"Unknown model provider {name!r}.",
+            f"Use one of: {', '.join(PROVIDERS)}, or give the server's URL.",
+        ) from None
+
+
+def config_path() -> Path:
+    """The user config file: ``$INTUITF_CONFIG`` or ``~/.config/intuitf/config.toml``."""
+    env = os.environ.get("INTUITF_CONFIG")
+    return Path(env) if env else Path.home() / ".config" / "intuitf" / "config.toml"
+
+
+def _key_from_config(provider: str) -> str | None:
+    path = config_path()
+    if not path.is_file():
+        return None
+    try:
+        data = tomllib.loads(path.read_text("utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        # The message names the file and the problem, never the file's content.
+        raise JudgeError(
+            f"The config file {path} could not be read ({type(exc).__name__}).",
+            "Fix its TOML syntax, or set the key in the environment instead.",
+        ) from None
+    keys = data.get("api_keys", {})
+    value = keys.get(provider) if isinstance(keys, dict) else None
+    return value if isinstance(value, str) and value else None
+
+
+def resolve_api_key(p: ProviderPreset, explicit: str | None = None) -> str | None:
+    """The API key for ``p``: explicit, then environment, then config file; None if absent."""
+    if explicit:
+        return explicit
+    for var in p.key_env:
+        value = os.environ.get(var)
+        if value:
+            return value
+    return _key_from_config(p.name)
+
+
+def require_api_key(p: ProviderPreset, explicit: str | None = None) -> str:
+    """The key for ``p``, or :data:`NO_KEY` for local servers; JudgeError when one is needed."""
+    key = resolve_api_key(p, explicit)
+    if key:
+        return key
+    if not p.needs_key:
+        return NO_KEY
+    raise JudgeError(
+        f"No API key for {p.name}.",
+        f'Set the environment variable {p.key_env[0]}, or add `{p.name} = "..."` under '
+        f"[api_keys] in {config_path()}.",
+    )
