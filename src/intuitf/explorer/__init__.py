@@ -9,10 +9,13 @@ random search (``"random"``).
 from intuitf.explorer.base import BaseExplorer
 from intuitf.explorer.bounds import Bounds, hsl_to_rgb, rgb_to_hsl
 from intuitf.explorer.candidate import Candidate
+from intuitf.explorer.cmaes import CMAExplorer
+from intuitf.explorer.factory import METHODS, explorer_from_state, make_explorer
 from intuitf.explorer.ga import Explorer
 from intuitf.explorer.genome import decode, encode, near_duplicate
 from intuitf.explorer.operators import MutationParams, crossover, elite_count, mutate, roulette
 from intuitf.explorer.population import random_tf, seeded_tf
+from intuitf.explorer.random_search import RandomSearchExplorer
 from intuitf.explorer.stages import (
     CUSTOMIZE,
     INITIALIZE,
@@ -26,20 +29,25 @@ from intuitf.explorer.stages import (
 __all__ = [
     "CUSTOMIZE",
     "INITIALIZE",
+    "METHODS",
     "REFINE",
     "STAGES",
     "BaseExplorer",
     "Bounds",
+    "CMAExplorer",
     "Candidate",
     "Decay",
     "Explorer",
     "MutationParams",
+    "RandomSearchExplorer",
     "StagePreset",
     "crossover",
     "decode",
     "elite_count",
     "encode",
+    "explorer_from_state",
     "hsl_to_rgb",
+    "make_explorer",
     "mutate",
     "near_duplicate",
     "paper_settings",

@@ -252,30 +252,41 @@ class BaseExplorer:
             self._rng, self._materials, self.n_gaussians, self.bounds, value_range=self.value_range
         )
 
-    def _fresh_population(self, initial: Sequence[GaussianTF]) -> list[Candidate]:
+    def _fresh_population(
+        self, initial: Sequence[GaussianTF], size: int | None = None, keep: Sequence[Candidate] = ()
+    ) -> list[Candidate]:
         """``initial`` as-is, variants of it, histogram seeds and random TFs, deduplicated.
 
-        In a freezing stage only variants of ``initial`` are made (fresh TFs would ignore
-        what is frozen).
+        ``size`` candidates (default: the population size) are made, none a near-duplicate
+        of ``keep`` or of each other. In a freezing stage only variants of ``initial`` are
+        made (fresh TFs would ignore what is frozen).
         """
-        n = self.population_size
-        pop: list[Candidate] = []
+        n = self.population_size if size is None else int(size)
+        pop: list[Candidate] = list(keep)
+        made: list[Candidate] = []
         for tf in initial:
             if self._preset.dedup and is_duplicate_of_any(tf, [c.tf for c in pop]):
                 continue
-            pop.append(self._new(tf, "initial"))
-        if self._preset.freeze_unselected and pop:
-            return self._fill_with_variants(pop, n)
-        if pop:
-            # Branching from earlier results: a third of the rest explores near them.
-            pop = self._fill_with_variants(pop, len(pop) + (n - len(pop)) // 3)
+            c = self._new(tf, "initial")
+            pop.append(c)
+            made.append(c)
+        if made:
+            # Branching from earlier results: a third of the rest explores near them (all
+            # of it in a freezing stage).
+            n_var = n - len(made) if self._preset.freeze_unselected else (n - len(made)) // 3
+            before = len(pop)
+            pop = self._fill_with_variants(pop, len(pop) + n_var, parents=made)
+            made += pop[before:]
         n_seed = round(self._preset.seed_share * n) if self._materials else 0
-        n_seed = min(n_seed, n - len(pop))
-        for _ in range(n_seed):
-            pop.append(self._unique(self._seeded, "seed", pop))
-        while len(pop) < n:
-            pop.append(self._unique(self._random, "random", pop))
-        return pop
+        for _ in range(min(n_seed, n - len(made))):
+            c = self._unique(self._seeded, "seed", pop)
+            pop.append(c)
+            made.append(c)
+        while len(made) < n:
+            c = self._unique(self._random, "random", pop)
+            pop.append(c)
+            made.append(c)
+        return made
 
     def _unique(self, make, origin: str, pop: list[Candidate]) -> Candidate:
         tf = make()
@@ -289,11 +300,13 @@ class BaseExplorer:
     def _variant_params(self) -> MutationParams:
         return self._preset.mutation_params(0.0)
 
-    def _fill_with_variants(self, pop: list[Candidate], size: int) -> list[Candidate]:
-        """Append mutated copies of ``pop``'s members (round robin) until it has ``size``."""
+    def _fill_with_variants(
+        self, pop: list[Candidate], size: int, parents: Sequence[Candidate] | None = None
+    ) -> list[Candidate]:
+        """Append mutated copies of ``parents`` (default ``pop``; round robin) up to ``size``."""
         params = self._variant_params()
         k = 0
-        base = list(pop)
+        base = list(parents if parents is not None else pop)
         while len(pop) < size:
             parent = base[k % len(base)]
             k += 1
