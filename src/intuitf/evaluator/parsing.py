@@ -170,13 +170,15 @@ def _from_lines(text: str, aspects: Sequence[Aspect]) -> ParsedAnswer | None:
         if not m:
             continue
         rest = m.group(1).strip()
+        # Per-aspect "key: choice" pairs on the marker's line and the lines after it?
+        found: dict[str, Choice] = {}
+        for tail in [rest, *lines[i + 1 :]]:
+            found.update({k: c for k, c in _keyed(tail, aspects).items() if k not in found})
+        if found:
+            return ParsedAnswer(found)
         if not rest and i + 1 < len(lines):
             rest = lines[i + 1]
         toks = [t for t in re.split(r"[\s,;/|]+", rest) if t]
-        # Per-aspect "key: choice" pairs on the final line?
-        found = _keyed(rest, aspects)
-        if found:
-            return ParsedAnswer(found)
         choices = [normalise_choice(t) for t in toks]
         if rest and normalise_choice(rest) is not None and len(keys) == 1:
             return ParsedAnswer({keys[0]: normalise_choice(rest)})  # type: ignore[dict-item]
