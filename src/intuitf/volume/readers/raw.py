@@ -10,7 +10,6 @@ Uncompressed files are memory-mapped, so downsampling a huge file reads it in sl
 from __future__ import annotations
 
 import gzip
-import math
 import re
 import struct
 import zlib
@@ -146,6 +145,22 @@ def _gzip_isize(path: Path) -> int | None:
         return struct.unpack("<I", fh.read(4))[0]
 
 
+def _corrupt(path: Path, exc: BaseException) -> VolumeError:
+    return VolumeError(
+        f"{path}: the gzip stream is corrupt or truncated ({exc}).",
+        "Download or copy the file again; check it with `gzip -t`.",
+    )
+
+
+def _check_gzip_start(path: Path) -> None:
+    """Decompress the first bytes of a gzip file, raising VolumeError if they are corrupt."""
+    try:
+        with gzip.open(path, "rb") as fh:
+            fh.read(1 << 16)
+    except (OSError, EOFError, zlib.error) as exc:
+        raise _corrupt(path, exc) from None
+
+
 def read(request: ReadRequest) -> RawArray:
     """Read a ``.raw`` or ``.raw.gz`` file."""
     path = request.path
@@ -181,6 +196,9 @@ def read(request: ReadRequest) -> RawArray:
 
     isize = _gzip_isize(path)
     if isize is not None and isize != expected % (1 << 32):
+        # The trailer says the size is wrong; trust it only if the stream itself is sound,
+        # so a corrupt file is reported as corrupt, not as a wrong shape.
+        _check_gzip_start(path)
         raise _size_mismatch(path, expected, isize, dims, dtype, compressed=True)
     request.reserve(dims, dtype)
     arr = np.empty((z, y, x), dtype=dtype)
@@ -196,15 +214,7 @@ def read(request: ReadRequest) -> RawArray:
                 got += k
             extra = len(fh.read(1 << 16)) if got == expected else 0
     except (OSError, EOFError, zlib.error) as exc:
-        raise VolumeError(
-            f"{path}: the gzip stream is corrupt or truncated ({exc}).",
-            "Download or copy the file again; check it with `gzip -t`.",
-        ) from None
+        raise _corrupt(path, exc) from None
     if got != expected or extra:
         raise _size_mismatch(path, expected, got + extra, dims, dtype, compressed=True)
     return RawArray(arr, spacing=None, name=name)
-
-
-def voxel_count(dims: tuple[int, int, int]) -> int:
-    """Number of voxels of a grid (Python int: no overflow)."""
-    return math.prod(int(d) for d in dims)
