@@ -29,14 +29,17 @@ class SampleCache:
     rather than multiplied, so the diffuse factor alone cannot carry it). Per run of 32
     samples it keeps the min and max value, so a TF renders by skipping runs it makes empty.
 
-    **Agreement with the direct renderer.** The only differences with
-    :meth:`VolumeRenderer.render_rgba` on the same camera are (a) the value is rounded to the
-    nearest LUT entry (half an entry at most) where the direct renderer interpolates between
-    entries, and (b) the shading terms are rounded to 1/255. Each sample's colour and alpha
-    therefore differ by at most half the TF's largest step between neighbouring LUT entries
-    plus 1/255 of the lit colour. Composited, on real volumes with smooth Gaussian TFs (tested
-    on CT data with random TFs), premultiplied RGBA differs by at most 6/255 at any pixel and
-    by less than 0.5/255 on average.
+    **Agreement with the direct renderer.** The cache takes the same samples at the same
+    positions as :meth:`VolumeRenderer.render_rgba`. Two things differ, and nothing else:
+    (a) each value is rounded to the nearest LUT entry (at most half an entry away) where the
+    direct renderer interpolates between entries, and (b) the shading terms are rounded to
+    1/255. So, with ``render_rgba(tf, camera, nearest=True)`` (direct rendering with the
+    cache's rounding) unshaded images are equal up to float rounding (1e-5), and shaded ones
+    differ by at most 1/255 (each sample's lit colour by at most (kd + ks)/510). Against the
+    interpolating direct renderer each sample's colour and alpha differ by at most half the
+    TF's largest step between neighbouring LUT entries; composited over CT volumes with random
+    TFs (widths 0.01–0.12) that is under 0.5/255 on average, under 8/255 at the 99.9th
+    percentile and under 20/255 at the very worst pixel (narrow Gaussians on sharp edges).
     """
 
     renderer: VolumeRenderer

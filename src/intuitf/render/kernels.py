@@ -203,14 +203,15 @@ def _half_vector(lx, ly, lz, dx, dy, dz):
 # ---------------------------------------------------------------------------------------------
 @njit(parallel=True, cache=True, fastmath=True)
 def march(
-    data, grad, shading, vis, bsize, lut, cam, spacing, dt, shade_params, t_stop, out
+    data, grad, shading, vis, bsize, lut, nearest, cam, spacing, dt, shade_params, t_stop, out
 ):
     """Render every pixel of ``cam`` into ``out`` (n_pixels, 4) premultiplied RGBA.
 
     Post-classification: the trilinear value indexes ``lut`` (L, 4 straight RGBA, alpha already
     corrected for ``dt``) with linear interpolation between entries. ``vis`` marks blocks of
     ``bsize`` cells whose values can have non-zero alpha; rays jump over the others, keeping
-    the sample grid, so skipping changes no pixel.
+    the sample grid, so skipping changes no pixel. ``nearest`` rounds the value to the nearest
+    entry instead of interpolating, exactly as the sample cache does (used to test the cache).
     """
     nz, ny, nx = data.shape
     nbz, nby, nbx = vis.shape
@@ -265,6 +266,8 @@ def march(
                         continue
                     v = _trilinear(data, px, py, pz, nx, ny, nz)
                     x = v * scale
+                    if nearest:
+                        x = float(int(x + 0.5))
                     q = int(x)
                     if q > nl - 2:
                         q = nl - 2

@@ -159,8 +159,14 @@ class VolumeRenderer:
         return out.reshape(h, w, 3)
 
     # -- direct rendering -----------------------------------------------------------------
-    def render_rgba(self, tf: GaussianTF, camera: Camera | None = None) -> np.ndarray:
-        """Premultiplied RGBA float32 (H, W, 4) of ``tf`` seen from ``camera``."""
+    def render_rgba(
+        self, tf: GaussianTF, camera: Camera | None = None, *, nearest: bool = False
+    ) -> np.ndarray:
+        """Premultiplied RGBA float32 (H, W, 4) of ``tf`` seen from ``camera``.
+
+        ``nearest=True`` classifies each sample by its nearest LUT entry instead of
+        interpolating between entries: the sample cache's rule, for checking it.
+        """
         lut = self.lut(tf)
         occupied = np.concatenate(([0], np.cumsum(lut[:, 3] > 0)))
         lo, hi = self._block_ranges()
@@ -174,6 +180,7 @@ class VolumeRenderer:
             vis,
             BLOCK_SIZE,
             lut,
+            bool(nearest),
             frame.packed(),
             self._spacing,
             self.sample_distance,
