@@ -7,12 +7,15 @@ and the Explorer live in their packages and are re-exported here as they land.
 """
 
 from intuitf.errors import IntuitfError
+from intuitf.explorer import Candidate, Explorer, make_explorer
 from intuitf.tf import Gaussian, GaussianTF, default_tf, load_tf, save_tf
 from intuitf.volume import Volume, load_volume, phantom
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "Candidate",
+    "Explorer",
     "Gaussian",
     "GaussianTF",
     "IntuitfError",
@@ -21,6 +24,7 @@ __all__ = [
     "default_tf",
     "load_tf",
     "load_volume",
+    "make_explorer",
     "phantom",
     "save_tf",
 ]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -34,6 +35,20 @@ def rng_from_state(state: dict) -> np.random.Generator:
 
 class BaseExplorer:
     """Ask/tell skeleton: ``ask()`` gives the population, ``tell(ranking)`` moves on.
+
+    Arguments (keyword only):
+        population: candidates per generation (constant).
+        n_gaussians: Gaussians per fresh TF (given ``initial`` TFs keep their own count).
+        generations: planned generations of the first stage (the schedules run over them).
+        stage: "initialize", "customize", "refine" (names in ``presets``) or a StagePreset.
+        seed: seeds the run's only random generator; same seed + same rankings = same run.
+        histogram: counts over [0, 1] (``Volume.histogram()[0]``); fresh populations then
+            place a share of TFs on the volume's materials.
+        value_range: original data units, recorded in every TF made.
+        initial: TFs included as-is in the first population (branching from earlier
+            results); the bounds widen to hold them. At most ``population`` are used.
+        bounds: where parameters may go (:class:`Bounds`; default: normalised defaults).
+        presets: the stage presets the names resolve to (default :data:`STAGES`).
 
     Subclasses implement :meth:`_next_population` (and may extend state and stages).
     Generations are counted over the whole run; ``progress`` restarts at each stage.
@@ -236,6 +251,10 @@ class BaseExplorer:
     def _new(self, tf: GaussianTF, origin: str, parents: Sequence[str] = ()) -> Candidate:
         cid = candidate_id(self._generation, self._counter)
         self._counter += 1
+        if origin != "initial":
+            # A made TF is named by its candidate id (exports and plots show it); the
+            # parent's name and metadata would describe a different TF.
+            tf = replace(tf, name=cid, metadata={})
         return Candidate(cid, tf, self._generation, origin, tuple(parents))
 
     def _random(self) -> GaussianTF:

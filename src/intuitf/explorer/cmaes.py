@@ -110,16 +110,15 @@ class CMAExplorer(BaseExplorer):
         self._X = self._es.ask()
         return [self._new(decode(x, self._template, self.bounds), "cma") for x in self._X]
 
-    def _fresh_population(self, initial, size=None, keep=()):  # noqa: D401 - base hook
-        if not hasattr(self, "_es"):
-            if initial:
-                template = initial[0]
-            elif self._materials:
-                template = self._seeded()
-            else:
-                template = self._random()
-            return self._start(template, self.sigma0)
-        return super()._fresh_population(initial, size, keep)
+    def _fresh_population(self, initial, size=None, keep=()):
+        # The first population: CMA-ES samples around the start point.
+        if initial:
+            template = initial[0]
+        elif self._materials:
+            template = self._seeded()
+        else:
+            template = self._random()
+        return self._start(template, self.sigma0)
 
     def _next_population(
         self, ranked: list[Candidate], fitness: np.ndarray, progress: float
@@ -129,10 +128,6 @@ class CMAExplorer(BaseExplorer):
         f = [float(pos[c.id]) for c in self._asked]
         self._es.tell(self._X, f)
         return self._sample()
-
-    def ask(self) -> list[Candidate]:
-        self._asked = list(self._population)
-        return super().ask()
 
     def tell(self, ranking: Sequence[str], fitness: Sequence[float] | None = None) -> None:
         """Report the ranking (ids, best first); ``fitness`` is ignored (only ranks count)."""
