@@ -45,7 +45,8 @@ def _make_judge(spec: str, run_dir: Path, base_url, budget_usd, budget_calls, sp
     if budget_usd is not None or budget_calls is not None:
         budget = Budget(max_usd=budget_usd, max_calls=budget_calls)
         if spent is not None:
-            budget.charge(calls=spent.calls, usd=spent.usd)
+            # A resumed run's budget covers the whole run: count what was already paid.
+            budget.calls, budget.usd = spent.calls, spent.usd
     if spec == "metric":
         return make_judge(spec)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -151,7 +152,7 @@ def register(app: typer.Typer) -> None:
         max_dim: int = typer.Option(None, "--max-dim", help="Downsample volumes larger than this."),
     ) -> None:
         """Find transfer functions that match what you want, unattended."""
-        from intuitf.cli.options import load_volume_from_options
+        from intuitf.cli.options import open_volume
 
         started = time.perf_counter()
         if resume is not None:
@@ -160,7 +161,7 @@ def register(app: typer.Typer) -> None:
             if volume is None:
                 raise IntuitfError("Give a VOLUME to optimize (or 'phantom'), or --resume RUN_DIR.")
             vol_args = dict(shape=shape, dtype=dtype, byte_order=byte_order, spacing=spacing, max_dim=max_dim)
-            vol = load_volume_from_options(volume, **vol_args)
+            vol = open_volume(volume, **vol_args)
             for note in vol.notes:
                 console.print(f"[yellow]note:[/] {note}")
             intent = _build_intent(text, image, sketch, on, about)
@@ -244,12 +245,12 @@ def _new_session(vol, intent, evaluator, base_url, run_dir, settings_kw, budget_
 
 
 def _resume_session(run_dir: Path, budget_usd, budget_calls, base_url):
-    from intuitf.cli.options import load_volume_from_options
+    from intuitf.cli.options import open_volume
     from intuitf.session import RunDirectory, Session
 
     rd = RunDirectory(run_dir)
     record = rd.read_run()
-    vol = load_volume_from_options(record.get("volume_source", "phantom"), **record.get("volume_args", {}))
+    vol = open_volume(record.get("volume_source", "phantom"), **record.get("volume_args", {}))
     ckpt = rd.read_checkpoint() or {}
     from intuitf.evaluator.types import Cost
 

@@ -50,6 +50,7 @@ def write_run_outputs(session: Session) -> None:
     counts, _ = session.volume.histogram()
     best = session.best(session.settings.top_k)
     summary = []
+    unit = min(session.volume.spacing)  # heights are opacity per voxel
     for rank, (tf, rating) in enumerate(best, start=1):
         tf = replace(tf.unfreeze(), value_range=session.volume.value_range, name=f"rank{rank:02d}")
         stem = rd.best_dir / f"rank{rank:02d}"
@@ -58,7 +59,7 @@ def write_run_outputs(session: Session) -> None:
         atomic_write_bytes(stem.with_name(stem.name + ".tf.json"), tf.to_json().encode())
         atomic_write_bytes(stem.with_name(stem.name + ".tf.png"), tf_plot(tf, counts))
         for fmt, suffix in EXPORT_FORMATS.items():
-            atomic_write_bytes(stem.with_name(stem.name + suffix), export_tf(tf, fmt).encode())
+            atomic_write_bytes(stem.with_name(stem.name + suffix), export_tf(tf, fmt, unit_distance=unit).encode())
         summary.append({"rank": rank, "rating": rating, "tf": f"best/rank{rank:02d}.tf.json"})
     atomic_write_json(rd.best_dir / "summary.json", summary)
     records = evolution_records(rd.read_journal())

@@ -313,8 +313,7 @@ class Session:
         images = [self.image(c.id, c.tf) for c in candidates]
         emit(self._event("rendered"))
 
-        preset = getattr(self.explorer, "stage_preset", None)
-        stage_aspects = getattr(preset, "aspects", None) or {
+        stage_aspects = getattr(self.explorer, "aspects", None) or {
             "initialize": "quality",
             "customize": "intent",
             "refine": "edit",

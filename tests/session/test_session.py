@@ -1,0 +1,106 @@
+"""The Session loop end to end: runs, journals, checkpoints, resumes, and ends cleanly."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from intuitf.errors import BudgetExhausted
+from intuitf.evaluator.types import Intent
+from intuitf.session import RunDirectory, RunSettings, Session
+from intuitf.volume import phantom
+
+SETTINGS = dict(population=8, generations=4, seed=3, image_size=64, output_size=96, top_k=2)
+
+
+@pytest.fixture(scope="module")
+def vol():
+    return phantom(size=48)
+
+
+def _intent():
+    return Intent(kind="text", text="opaque white bone, faint red skin", about="a phantom head")
+
+
+def _best_tfs(outcome):
+    return [tf.to_dict() for tf, _ in outcome.best]
+
+
+def test_run_in_memory_improves_and_keeps_elites(vol):
+    s = Session.create(vol, intent=_intent(), settings=RunSettings(**SETTINGS))
+    out = s.run()
+    assert out.completed and out.generations_done == 4
+    assert s.plan == [("initialize", 1), ("customize", 3)]
+    # The best of each generation survives into the next one unchanged (elitism).
+    for prev, nxt in zip(s.records, s.records[1:], strict=False):
+        assert prev.best_id in [c["id"] for c in nxt.candidates]
+
+
+def test_run_folder_has_every_output(vol, tmp_path):
+    run = tmp_path / "run"
+    s = Session.create(vol, intent=_intent(), settings=RunSettings(**SETTINGS), run_dir=run)
+    out = s.run()
+    assert out.completed
+    rd = RunDirectory(run)
+    record = json.loads(rd.run_json.read_text())
+    assert record["settings"]["seed"] == 3 and record["intent"]["text"].startswith("opaque")
+    gens = [e for e in rd.read_journal() if e["type"] == "generation"]
+    assert [e["generation"] for e in gens] == [0, 1, 2, 3]
+    assert all(len(e["candidates"]) == 8 for e in gens)
+    assert rd.read_journal()[-1]["type"] == "end"
+    for name in ("rank01.png", "rank01.tf.json", "rank01.tf.png", "rank01.paraview.json",
+                 "rank01.vp", "rank01.vtk.py", "rank01.1dt", "rank02.png"):
+        assert (run / "best" / name).stat().st_size > 0, name
+    assert (run / "generations" / "gen003.png").exists()
+    assert (run / "evolution.png").exists()
+    html = (run / "report.html").read_text()
+    assert "data:image/png;base64," in html
+    tf = json.loads((run / "best" / "rank01.tf.json").read_text())
+    assert tf["value_range"] == list(vol.value_range)
+
+
+def test_interrupted_run_resumes_to_the_same_result(vol, tmp_path):
+    ref = Session.create(vol, intent=_intent(), settings=RunSettings(**SETTINGS), run_dir=tmp_path / "a").run()
+
+    def interrupt_in_generation_2(event):
+        if event.kind == "round" and event.generation == 2:
+            raise KeyboardInterrupt
+
+    s = Session.create(vol, intent=_intent(), settings=RunSettings(**SETTINGS), run_dir=tmp_path / "b")
+    out = s.run(interrupt_in_generation_2)
+    assert out.reason == "interrupted" and out.generations_done == 2
+    resumed = Session.resume(tmp_path / "b", vol, s.judge)
+    assert resumed.generation == 2 and resumed.stage == "customize"
+    out2 = resumed.run()
+    assert out2.completed and out2.generations_done == 4
+    assert _best_tfs(out2) == _best_tfs(ref)
+
+
+def test_budget_stop_is_clean_and_saved(vol, tmp_path):
+    class BrokeJudge:
+        """Answers like the metric judge until its budget runs out."""
+
+        name = "broke"
+
+        def __init__(self, inner, calls):
+            self.inner, self.left = inner, calls
+
+        async def compare(self, a, b, aspects, intent):
+            if self.left <= 0:
+                raise BudgetExhausted("The call budget is spent.")
+            self.left -= 1
+            return await self.inner.compare(a, b, aspects, intent)
+
+    from intuitf.evaluator.metric import MetricJudge
+
+    judge = BrokeJudge(MetricJudge(), calls=40)
+    s = Session.create(vol, intent=_intent(), judge=judge, settings=RunSettings(**SETTINGS), run_dir=tmp_path / "r")
+    out = s.run()
+    assert out.reason == "budget"
+    assert 1 <= out.generations_done < 4
+    rd = RunDirectory(tmp_path / "r")
+    assert rd.read_checkpoint()["generation"] == out.generations_done
+    kinds = [e["type"] for e in rd.read_journal()]
+    assert "partial" in kinds and kinds[-1] == "end"
+    assert (tmp_path / "r" / "best" / "rank01.png").exists()
