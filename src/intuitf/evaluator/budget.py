@@ -4,8 +4,9 @@ A :class:`Budget` may be shared by several judges. A call first *reserves* its p
 and an estimate of its price); when the reservation would go past a limit,
 :class:`~intuitf.errors.BudgetExhausted` is raised and no request is sent. Reservations count
 calls still in flight, so many concurrent calls cannot overshoot the call limit together. The
-money limit relies on the estimate (the dearest call seen so far, or the caller's guess before the
-first answer), so it is respected up to one call's misestimate.
+money limit relies on the caller's estimate of the next call (a judge passes the dearest call it has
+seen, or a rough guess from the prompt size before its first answer; with no estimate, the dearest
+call this budget has seen), so it is respected up to one call's misestimate.
 """
 
 from __future__ import annotations
@@ -27,12 +28,12 @@ class Budget:
     _reserved_usd: float = field(default=0.0, repr=False)
     _dearest: float = field(default=0.0, repr=False)
 
-    def reserve(self, estimate_usd: float = 0.0) -> float:
+    def reserve(self, estimate_usd: float | None = None) -> float:
         """Claim room for one call; raise BudgetExhausted if it would exceed a limit.
 
         Returns the amount reserved, to give back to :meth:`settle` or :meth:`release`.
         """
-        est = max(float(estimate_usd), self._dearest)
+        est = self._dearest if estimate_usd is None else max(0.0, float(estimate_usd))
         if self.max_calls is not None and self.calls + self._reserved_calls + 1 > self.max_calls:
             raise BudgetExhausted(
                 f"The call budget is spent ({self.calls} of {self.max_calls} calls).",

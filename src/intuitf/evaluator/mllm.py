@@ -151,6 +151,7 @@ class MLLMJudge:
         self._sem: asyncio.Semaphore | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._rng = random.Random()
+        self._dearest_usd = 0.0
 
     def __repr__(self) -> str:
         return (
@@ -193,6 +194,9 @@ class MLLMJudge:
     # -- one call -----------------------------------------------------------------------------
 
     def _estimate_usd(self, prompt: str, n_images: int) -> float:
+        """The next call's price: the dearest seen so far, else a guess from the prompt size."""
+        if self._dearest_usd > 0:
+            return self._dearest_usd
         tokens_in = len(prompt) // 4 + n_images * _IMAGE_TOKENS_GUESS
         return self.prices.cost(self.model, tokens_in, 300)
 
@@ -262,6 +266,7 @@ class MLLMJudge:
                 cost.input_tokens += tin
                 cost.output_tokens += tout
                 cost.usd += usd
+                self._dearest_usd = max(self._dearest_usd, usd)
                 return resp, cost
             attempt += 1
             if attempt > self.max_retries:
