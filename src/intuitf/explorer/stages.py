@@ -153,7 +153,6 @@ CUSTOMIZE = StagePreset(
     hue_step=Decay(0.1, 0.02),
     sl_step=Decay(0.25, 0.05),
     swap_prob=0.25,
-    seed_share=0.0,
 )
 
 #: Refinement: only the selected Gaussians evolve (the rest are frozen); edit aspects.
