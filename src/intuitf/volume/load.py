@@ -25,6 +25,7 @@ from __future__ import annotations
 import gzip
 import importlib
 import os
+import struct
 import zlib
 from collections.abc import Callable
 from pathlib import Path
@@ -136,7 +137,16 @@ def load_volume(
         raise VolumeError(
             f"{p}: ran out of memory while reading.", "Pass --max-dim 256 to downsample."
         ) from None
-    except (OSError, EOFError, zlib.error, gzip.BadGzipFile, ValueError, KeyError) as exc:
+    except (
+        OSError,
+        EOFError,
+        zlib.error,
+        gzip.BadGzipFile,
+        ValueError,
+        KeyError,
+        IndexError,
+        struct.error,
+    ) as exc:
         raise VolumeError(
             f"{p}: the file could not be read; it may be truncated or corrupt ({exc}).",
             "Check that the file is complete and of the type its extension says.",

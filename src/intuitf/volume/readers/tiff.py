@@ -79,7 +79,7 @@ def read(request: ReadRequest) -> RawArray:
                     )
                 request.reserve((squeezed[2], squeezed[1], squeezed[0]), series.dtype)
                 arr = series.asarray().reshape(squeezed)
-    except (tifffile.TiffFileError, ValueError, OSError) as exc:
+    except (tifffile.TiffFileError, ValueError, OSError, IndexError, KeyError) as exc:
         raise VolumeError(
             f"{path}: not a readable TIFF ({exc}).", "Check that the file is complete."
         ) from None
