@@ -198,3 +198,16 @@ def test_candidate_round_trip():
     c = ex.ask()[0]
     d = json.loads(json.dumps(c.to_dict()))
     assert Candidate.from_dict(d) == c
+
+
+def test_bad_set_stage_changes_nothing():
+    ex = Explorer(population=6, n_gaussians=3, generations=4, seed=0)
+    ex.tell([c.id for c in ex.ask()])
+    before = json.dumps(ex.state_dict())
+    with pytest.raises(ValueError):
+        ex.set_stage("refine", generations=9, selected=[5])
+    with pytest.raises(ValueError):
+        ex.set_stage("refine", selected=[])
+    with pytest.raises(ValueError):
+        ex.set_stage("nonsense")
+    assert json.dumps(ex.state_dict()) == before

@@ -210,37 +210,30 @@ class BaseExplorer:
         unfreeze everything.
         """
         preset = self._resolve(stage)
-        if generations is not None:
-            if int(generations) < 1:
-                raise ValueError("generations must be at least 1.")
-            self._stage_generations = int(generations)
-        self._preset = preset
-        self._stage_start = self._generation
+        if generations is not None and int(generations) < 1:
+            raise ValueError("generations must be at least 1.")
+        sel = sorted({int(i) for i in selected})
         if preset.freeze_unselected:
-            sel = sorted({int(i) for i in selected})
+            # Check everything before changing anything: a bad call leaves the run as it was.
             if not sel:
                 raise ValueError("The refine stage needs at least one selected Gaussian index.")
-            tfs = [base] if base is not None else [c.tf for c in self._population]
-            for tf in tfs:
+            for tf in [base] if base is not None else [c.tf for c in self._population]:
                 if sel[0] < 0 or sel[-1] >= len(tf):
                     raise ValueError(
                         f"Selected Gaussian indices {sel} out of range for {len(tf)} Gaussians."
                     )
-            if base is not None:
-                self.bounds = self.bounds.covering([base])
-                self._population = self._variants_of([base.freeze(sel)])
-            else:
-                self._population = [self._retf(c, c.tf.freeze(sel)) for c in self._population]
+        if generations is not None:
+            self._stage_generations = int(generations)
+        self._preset = preset
+        self._stage_start = self._generation
+        if base is not None:
+            self.bounds = self.bounds.covering([base])
+            start = base.freeze(sel) if preset.freeze_unselected else base.unfreeze()
+            self._population = self._variants_of([start])
+        elif preset.freeze_unselected:
+            self._population = [self._retf(c, c.tf.freeze(sel)) for c in self._population]
         else:
-            if base is not None:
-                self.bounds = self.bounds.covering([base])
-                self._population = self._variants_of([base.unfreeze()])
-            else:
-                self._population = [self._retf(c, c.tf.unfreeze()) for c in self._population]
-        self._on_stage_change()
-
-    def _on_stage_change(self) -> None:
-        """Hook for subclasses whose search state depends on the stage."""
+            self._population = [self._retf(c, c.tf.unfreeze()) for c in self._population]
 
     @staticmethod
     def _retf(c: Candidate, tf: GaussianTF) -> Candidate:
