@@ -148,10 +148,8 @@ class CMAExplorer(BaseExplorer):
         A freezing stage encodes only the ``selected`` Gaussians; the rest stay fixed.
         """
         preset = self._resolve(stage)
-        if generations is not None:
-            if int(generations) < 1:
-                raise ValueError("generations must be at least 1.")
-            self._stage_generations = int(generations)
+        if generations is not None and int(generations) < 1:
+            raise ValueError("generations must be at least 1.")
         start = base or (self._best.tf if self._best else self._population[0].tf)
         if preset.freeze_unselected:
             sel = sorted({int(i) for i in selected})
@@ -160,6 +158,8 @@ class CMAExplorer(BaseExplorer):
             template = start.freeze(sel)
         else:
             template = start.unfreeze()
+        if generations is not None:
+            self._stage_generations = int(generations)
         self.bounds = self.bounds.covering([template])
         self._preset = preset
         self._stage_start = self._generation
