@@ -73,6 +73,7 @@ class _OrderResult:
     cost: Cost = field(default_factory=Cost)
     error: str | None = None
     cached: bool = False
+    swapped: bool = False
 
 
 class MLLMJudge:
@@ -240,6 +241,7 @@ class MLLMJudge:
                     continue
                 cost.failed_calls += 1
                 if status not in _RETRYABLE:
+                    self.cost += cost
                     raise JudgeError(
                         f"The model server for {self.name} rejected the request (HTTP {status}): "
                         f"{self._redact(_short(exc))}",
@@ -322,6 +324,7 @@ class MLLMJudge:
                     rationale=dict(hit.get("rationale", {})),
                     cost=Cost(cached_calls=1),
                     cached=True,
+                    swapped=swapped,
                 )
         messages = [
             {"role": "system", "content": SYSTEM_PROMPT},
@@ -344,7 +347,10 @@ class MLLMJudge:
             msg = f"{exc.reason}: {self._redact(exc.detail)[:160]}"
             log.warning("%s: unusable answer counted as a tie (%s).", self.name, msg)
             return _OrderResult(
-                per_aspect={a.key: Choice.TIE for a in aspects}, cost=cost, error=msg
+                per_aspect={a.key: Choice.TIE for a in aspects},
+                cost=cost,
+                error=msg,
+                swapped=swapped,
             )
         rationale = dict(parsed.rationale)
         if parsed.reference_description:
@@ -362,7 +368,7 @@ class MLLMJudge:
                     "usd": cost.usd,
                 },
             )
-        return _OrderResult(orient(parsed.per_aspect), rationale, cost)
+        return _OrderResult(orient(parsed.per_aspect), rationale, cost, swapped=swapped)
 
     # -- the Judge protocol -------------------------------------------------------------------
 
@@ -423,12 +429,12 @@ class MLLMJudge:
             )
         overall, p, per = _combine(valid, aspects)
         rationale: dict[str, str] = {}
-        for k in {k for r in valid for k in r.rationale}:
-            texts = [r.rationale[k] for r in valid if r.rationale.get(k)]
-            rationale[k] = (
-                texts[0]
-                if len(texts) == 1
-                else " | ".join(f"(order {i + 1}) {t}" for i, t in enumerate(texts))
+        for k in sorted({k for r in valid for k in r.rationale}):
+            texts = [(r.swapped, r.rationale[k]) for r in valid if r.rationale.get(k)]
+            # Analyses speak of "Image 1/2" as shown; say which order each one saw.
+            rationale[k] = " | ".join(
+                f"({'swapped' if sw else 'as given'}) {t}" if len(texts) > 1 else t
+                for sw, t in texts
             )
         return Verdict(
             per_aspect=per,
