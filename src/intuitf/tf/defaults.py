@@ -23,17 +23,23 @@ class Material:
 def background_cutoff(counts: np.ndarray) -> float:
     """Normalised value below which voxels are background (air, empty space).
 
-    The first valley after a dominant low-value mode, or 0 when the low end is not dominant.
+    The first valley after a dominant low-value mode (air around a CT scan), or after a mode
+    in the lower half that holds at least 30 % of the voxels (a scan whose surrounding medium
+    is not at the bottom of the range, like the embedding around a tooth); 0 when neither.
     """
     c = counts.astype(np.float64)
     n = c.size
     logc = gaussian_filter1d(np.log1p(c), 2.0)
-    first = int(np.argmax(logc[: max(2, n // 4)]))
-    if c[: max(1, n // 10)].sum() < 0.2 * c.sum():
-        return 0.0
+    if c[: max(1, n // 10)].sum() >= 0.2 * c.sum():
+        first = int(np.argmax(logc[: max(2, n // 4)]))
+    else:
+        first = int(np.argmax(c[: max(2, n // 2)]))
+        half = max(1, n // 64)
+        if c[max(0, first - half) : first + half + 1].sum() < 0.3 * c.sum():
+            return 0.0
     valleys, _ = find_peaks(-logc[first:])
     idx = first + int(valleys[0]) if len(valleys) else first + max(1, n // 50)
-    return float(min(idx, n // 3)) / (n - 1)
+    return float(min(idx, first + n // 3)) / (n - 1)
 
 
 def find_materials(counts: np.ndarray, max_materials: int = 5) -> list[Material]:
@@ -102,5 +108,7 @@ def default_tf(counts: np.ndarray, value_range: tuple[float, float] | None = Non
         height = float(0.02 + (0.6 - 0.02) * t**2)
         width = float(np.clip(max(m.spread, 0.015), WIDTH_RANGE[0], 0.08))
         color = _RAMP[min(len(_RAMP) - 1, round(t * (len(_RAMP) - 2)) + (1 if t == 1 else 0))]
-        gaussians.append(Gaussian(mean=float(np.clip(m.center, 0, 1)), width=width, height=height, color=color))
+        gaussians.append(
+            Gaussian(mean=float(np.clip(m.center, 0, 1)), width=width, height=height, color=color)
+        )
     return GaussianTF(tuple(gaussians), value_range=value_range, name="default")

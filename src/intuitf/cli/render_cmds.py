@@ -1,0 +1,156 @@
+"""``intuitf render``: one picture of a volume with a transfer function and a camera."""
+
+from __future__ import annotations
+
+import re
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+from intuitf.cli import options as vo
+from intuitf.errors import RenderError
+
+_VIEW = "View options"
+
+#: Named backgrounds the --background option accepts besides R,G,B and #rrggbb.
+NAMED_COLORS = {
+    "black": (0.0, 0.0, 0.0),
+    "white": (1.0, 1.0, 1.0),
+    "grey": (0.5, 0.5, 0.5),
+    "gray": (0.5, 0.5, 0.5),
+}
+
+
+def parse_color(text: str) -> tuple[float, float, float]:
+    """A colour from ``black``/``white``/``grey``, ``#rrggbb``, ``R,G,B`` in 0–255 or in [0, 1]."""
+    t = text.strip().lower()
+    if t in NAMED_COLORS:
+        return NAMED_COLORS[t]
+    if re.fullmatch(r"#?[0-9a-f]{6}", t):
+        h = t.lstrip("#")
+        return tuple(int(h[i : i + 2], 16) / 255.0 for i in (0, 2, 4))  # type: ignore[return-value]
+    parts = [p for p in re.split(r"[,\s]+", t) if p]
+    try:
+        vals = [float(p) for p in parts]
+    except ValueError:
+        vals = []
+    if len(vals) == 3 and all(0 <= v <= 255 for v in vals):
+        scale = 255.0 if max(vals) > 1 else 1.0
+        return tuple(v / scale for v in vals)  # type: ignore[return-value]
+    raise RenderError(
+        f"--background {text!r} is not a colour.",
+        "Use black, white, grey, #rrggbb, or R,G,B (0–255 or 0–1).",
+    )
+
+
+def parse_size(text: str) -> int | tuple[int, int]:
+    """``512`` or ``640x480`` (width × height)."""
+    m = re.fullmatch(r"\s*(\d+)\s*(?:[x×,]\s*(\d+))?\s*", text)
+    if not m:
+        raise RenderError(
+            f"--size {text!r} is not a picture size.", "Use N for N×N or WxH, e.g. 640x480."
+        )
+    return int(m[1]) if m[2] is None else (int(m[1]), int(m[2]))
+
+
+def render_command(
+    volume: vo.VolumeArg,
+    output: Annotated[
+        Path, typer.Option("--output", "-o", help="PNG file to write.", show_default=False)
+    ],
+    tf_path: Annotated[
+        Path | None,
+        typer.Option(
+            "--tf",
+            metavar="TF.json",
+            help="Transfer function (default: one made from the volume's histogram).",
+        ),
+    ] = None,
+    azimuth: Annotated[
+        float,
+        typer.Option(help="Turn about the vertical (z) axis, degrees.", rich_help_panel=_VIEW),
+    ] = 30.0,
+    elevation: Annotated[
+        float, typer.Option(help="Raise the camera towards +z, degrees.", rich_help_panel=_VIEW)
+    ] = 20.0,
+    roll: Annotated[
+        float, typer.Option(help="Turn the picture clockwise, degrees.", rich_help_panel=_VIEW)
+    ] = 0.0,
+    zoom: Annotated[
+        float,
+        typer.Option(help="1 fits the whole volume; 2 is twice as large.", rich_help_panel=_VIEW),
+    ] = 1.0,
+    fov: Annotated[
+        float, typer.Option(help="Perspective view angle, degrees.", rich_help_panel=_VIEW)
+    ] = 30.0,
+    orthographic: Annotated[
+        bool, typer.Option("--orthographic", help="Parallel projection.", rich_help_panel=_VIEW)
+    ] = False,
+    size: Annotated[
+        str, typer.Option(metavar="N|WxH", help="Picture size in pixels.", rich_help_panel=_VIEW)
+    ] = "512",
+    shading: Annotated[
+        bool,
+        typer.Option("--shading/--no-shading", help="Gradient lighting.", rich_help_panel=_VIEW),
+    ] = True,
+    background: Annotated[
+        str,
+        typer.Option(
+            metavar="COLOR", help="black, white, #rrggbb or R,G,B.", rich_help_panel=_VIEW
+        ),
+    ] = "black",
+    sample_distance: Annotated[
+        float, typer.Option(help="Ray step in voxels.", rich_help_panel=_VIEW)
+    ] = 0.5,
+    shape: vo.ShapeOpt = None,
+    dtype: vo.DtypeOpt = None,
+    byte_order: vo.ByteOrderOpt = None,
+    spacing: vo.SpacingOpt = None,
+    max_dim: vo.MaxDimOpt = None,
+) -> None:
+    """Render VOLUME with a transfer function and write a PNG.
+
+    The camera orbits the volume's centre: azimuth 0 / elevation 0 looks from -y towards +y
+    with +z up; zoom 1 fits the whole volume.
+    """
+    from intuitf.imageio import save_png
+    from intuitf.render import Camera, VolumeRenderer
+    from intuitf.tf import default_tf, load_tf
+
+    console = Console(stderr=True)
+    bg = parse_color(background)
+    picture = parse_size(size)
+    camera = Camera(
+        azimuth=azimuth,
+        elevation=elevation,
+        roll=roll,
+        zoom=zoom,
+        fov=fov,
+        projection="orthographic" if orthographic else "perspective",
+    )
+    tf = load_tf(tf_path) if tf_path is not None else None
+    vol = vo.open_volume(volume, shape, dtype, byte_order, spacing, max_dim)
+    for note in vol.notes:
+        console.print(f"[dim]{note}[/]", highlight=False)
+    if tf is None:
+        tf = default_tf(vol.histogram()[0], vol.value_range)
+    renderer = VolumeRenderer(
+        vol, size=picture, shading=shading, background=bg, sample_distance=sample_distance
+    )
+    t = time.perf_counter()
+    image = renderer.render(tf, camera)
+    took = time.perf_counter() - t
+    path = save_png(image, output)
+    console.print(
+        f"Wrote {path} ({renderer.width}×{renderer.height}, {len(tf)} Gaussians, "
+        f"{took * 1000:.0f} ms).",
+        highlight=False,
+    )
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``render`` to ``app``."""
+    app.command("render")(render_command)
