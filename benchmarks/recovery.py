@@ -84,6 +84,7 @@ def run_method(vol, target_img, server, method, population, generations, size, s
             dict(generation=rec.generation, ssim=ssim, delta_e=de, calls=session.cost.calls,
                  seconds=time.perf_counter() - t0)
         )
+    session.close()
     return rows
 
 

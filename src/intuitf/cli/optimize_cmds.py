@@ -90,7 +90,10 @@ def _run_with_progress(session):
         console=console,
         transient=False,
     ) as progress:
-        return session.run(_ProgressView(progress))
+        try:
+            return session.run(_ProgressView(progress))
+        finally:
+            session.close()
 
 
 def _print_summary(outcome, session, started: float) -> None:

@@ -145,6 +145,8 @@ class Session:
         self._images: dict[str, np.ndarray] = {}
         self.records: list[GenerationRecord] = []
         self.generation_seconds: list[float] = []
+        # One event loop for the session's life: model clients keep connections bound to it.
+        self._loop: asyncio.AbstractEventLoop | None = None
 
     # -- construction ---------------------------------------------------------------------
     @classmethod
@@ -332,7 +334,7 @@ class Session:
             emit(self._event("round", round=round_index, rounds=rounds, cost=self.cost + cost))
 
         try:
-            result = asyncio.run(tournament.run(images, ids, prior=prior or None, progress=on_round))
+            result = self._run_async(tournament.run(images, ids, prior=prior or None, progress=on_round))
         except (BudgetExhausted, JudgeError) as exc:
             partial = getattr(exc, "partial", None)
             if partial is not None:
@@ -463,6 +465,24 @@ class Session:
         )
         base.update(kw)
         return ProgressEvent(**base)
+
+    def _run_async(self, coro):
+        if self._loop is None or self._loop.is_closed():
+            self._loop = asyncio.new_event_loop()
+        return self._loop.run_until_complete(coro)
+
+    def close(self) -> None:
+        """Release the session's event loop and the judge's connections."""
+        loop, self._loop = self._loop, None
+        if loop is not None and not loop.is_closed():
+            aclose = getattr(self.judge, "aclose", None)
+            if aclose is not None:
+                try:
+                    loop.run_until_complete(aclose())
+                except Exception:  # closing must never hide the run's own outcome
+                    pass
+            loop.run_until_complete(loop.shutdown_asyncgens())
+            loop.close()
 
     def _journal(self, entry: dict) -> None:
         if self.run_dir is not None:
