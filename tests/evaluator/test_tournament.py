@@ -155,17 +155,46 @@ def test_noisy_oracle_still_ranks_well(protocol):
     assert np.mean(taus) > 0.65
 
 
-def test_priors_carry_and_shorten_the_tournament():
+def test_priors_seed_first_round_pairing_only_in_efficient_protocol():
     qs = shuffled(40, seed=5)
-    prior = {f"q{q}": 1600.0 + 4 * (q - 100) for q in sorted(qs)[-10:]}
+    top = sorted(qs)[-10:]
+    prior = {f"q{q}": 1600.0 + 4 * (q - 100) for q in top}
     eff = run(SwissTournament(OracleJudge(), ASPECTS, seed=1), qs, prior=prior)
-    assert eff.rounds == default_rounds(40) - 1
+    assert eff.rounds == default_rounds(40)
+    # Round 1 pairs by prior rating: the prior-rated elites meet each other.
+    first = [m for m in eff.matches if m.round == 1]
+    elite = {f"q{q}" for q in top}
+    assert sum(1 for m in first if m.first in elite and m.second in elite) == 5
     paper = run(SwissTournament(OracleJudge(), ASPECTS, protocol="paper", seed=1), qs, prior=prior)
-    assert paper.rounds == default_rounds(40)
-    first_round = [m for m in paper.matches if m.round == 1]
-    assert all(m.verdict is not None for m in first_round)
-    # The paper protocol ignores priors: after round 1 everyone is at 1600 +- 16.
-    assert set(paper.elo) == set(eff.elo)
+    first = [m for m in paper.matches if m.round == 1]
+    assert sum(1 for m in first if m.first in elite and m.second in elite) < 5
+    assert all(abs(paper.elo[k] - 1600) <= 16 * paper.rounds for k in paper.elo)
+
+
+class BiasedJudge(OracleJudge):
+    """Right on every pair, except that it always prefers q55 when shown first (a bias)."""
+
+    async def compare(self, first, second, aspects, intent) -> Verdict:
+        if quality(first) == 55:
+            self.calls.append((55, quality(second)))
+            return Verdict({"quality": Choice.FIRST}, Choice.FIRST, 1.0, cost=Cost(calls=1))
+        return await super().compare(first, second, aspects, intent)
+
+
+def test_surprising_verdicts_are_asked_again_in_the_other_order():
+    qs = shuffled(16, seed=3)
+    judge = BiasedJudge()
+    res = run(SwissTournament(judge, ASPECTS, seed=2, recheck_above=0.6), qs)
+    rechecked = [m for m in res.matches if m.rechecked]
+    assert rechecked, "an upset by a weak player should be re-asked"
+    assert res.cost.calls == len(res.matches) + len(rechecked)
+    for m in rechecked:
+        assert m.verdict.cost.calls == 2
+        # The re-ask showed the pair the other way round.
+        assert (quality(img(int(m.second[1:]))), quality(img(int(m.first[1:])))) in judge.calls
+    off = run(SwissTournament(BiasedJudge(), ASPECTS, seed=2, recheck_above=None), qs)
+    assert not any(m.rechecked for m in off.matches)
+    assert off.cost.calls == len(off.matches)
 
 
 def test_bradley_terry_recovers_strengths():
