@@ -168,6 +168,17 @@ def collect_run(run_dir: str | Path) -> RunContents:
 
 
 # -- HTML -----------------------------------------------------------------------------------
+def _short(value: Any) -> Any:
+    """``value`` with every float rounded to 6 significant digits, for display."""
+    if isinstance(value, float):
+        return float(f"{value:.6g}")
+    if isinstance(value, dict):
+        return {k: _short(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_short(v) for v in value]
+    return value
+
+
 def _e(value: Any) -> str:
     """Any value as escaped text (nested values as compact JSON)."""
     if value is None:
@@ -175,7 +186,7 @@ def _e(value: Any) -> str:
     if isinstance(value, float):
         return html.escape(f"{value:.6g}")
     if isinstance(value, dict | list | tuple):
-        return html.escape(json.dumps(value, ensure_ascii=False, default=str))
+        return html.escape(json.dumps(_short(value), ensure_ascii=False, default=str))
     return html.escape(str(value))
 
 
@@ -311,9 +322,14 @@ def report_html(c: RunContents) -> str:
         head += f'<div class="intent">“{html.escape(str(intent_text))}”</div>'
 
     key_settings = ["evaluator", "population", "generations", "seed"]
-    setting_rows = [(k, settings.get(k)) for k in key_settings if k in settings]
+    # Older and newer run records keep the evaluator in settings or as "judge" beside them.
+    settings = {"evaluator": run.get("judge"), **settings} if "judge" in run else settings
+    setting_rows = [(k, settings.get(k)) for k in key_settings if settings.get(k) is not None]
     setting_rows += [(k, v) for k, v in settings.items() if k not in key_settings]
-    intent_rows = [(k, v) for k, v in intent.items() if k != "text"]
+    # Flags that are off and empty fields say nothing about the intent: leave them out.
+    intent_rows = [
+        (k, v) for k, v in intent.items() if k != "text" and v not in (None, False, [], "")
+    ]
     volume_rows = [
         ("name", volume.get("name")),
         ("source", volume.get("source")),
