@@ -24,6 +24,7 @@ app = typer.Typer(
 #: Modules under intuitf.cli that contribute commands (each has ``register(app)``).
 COMMAND_MODULES = [
     "intuitf.cli.volume_cmds",
+    "intuitf.cli.judge_cmds",
     "intuitf.cli.render_cmds",
     "intuitf.cli.export_cmds",
     "intuitf.cli.optimize_cmds",
