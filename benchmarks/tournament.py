@@ -11,9 +11,10 @@ Protocols:
 
 - ``authors``: ratings reset every generation, ``floor(log2 n) + 2`` = 7 rounds (175 pairs at
   n = 50), every pair asked in both orders (``swap="always"``), no verdict cache.
-- ``efficient``: ``SwissTournament(protocol="efficient")`` with the survivors' ratings carried
-  as ``prior``, ``MLLMJudge(swap="auto")`` (one call per pair in a content-fixed order, the
-  other order only after an undecided answer) and a verdict cache.
+- ``efficient``: ``SwissTournament(protocol="efficient")`` (Bradley-Terry ranking and pairing,
+  surprising verdicts re-asked in the other order), ``MLLMJudge(swap="never")`` (one call per
+  pair, orientation drawn by the tournament), a verdict cache, and the survivors' ratings passed
+  as ``prior`` (they seed the first round's pairing).
 - ``paper+auto`` (only with ``--variants``): the authors' schedule with single-call judging, to
   separate the effect of swap debiasing from the effect of priors and the Bradley-Terry fit.
 
@@ -119,7 +120,7 @@ async def run_protocol(
     else:
         cache = VerdictCache(":memory:")
         judge = MLLMJudge(
-            base_url=base_url, swap="auto", max_concurrency=64, max_retries=2, cache=cache
+            base_url=base_url, swap="never", max_concurrency=64, max_retries=2, cache=cache
         )
         protocol, rounds = "efficient", None
     pop = Population(target, seed)
