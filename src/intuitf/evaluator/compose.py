@@ -70,7 +70,9 @@ def encode_image(arr: np.ndarray, fmt: ImageFormat = "png", quality: int = 90) -
     if fmt == "jpeg":
         img.save(buf, format="JPEG", quality=quality)
         return "image/jpeg", buf.getvalue()
-    img.save(buf, format="PNG")
+    # Fast compression: a rendering is sent once, and level 1 is ~4x faster than the default
+    # for about 20% more bytes.
+    img.save(buf, format="PNG", compress_level=1)
     return "image/png", buf.getvalue()
 
 

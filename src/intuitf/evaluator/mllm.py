@@ -326,13 +326,12 @@ class MLLMJudge:
                     cached=True,
                     swapped=swapped,
                 )
+        # Encoding takes milliseconds per image; a worker thread keeps the event loop (and the
+        # other comparisons' HTTP traffic) moving meanwhile.
+        parts = await asyncio.to_thread(content_parts, images, self.image_format, self.jpeg_quality)
         messages = [
             {"role": "system", "content": SYSTEM_PROMPT},
-            {
-                "role": "user",
-                "content": [{"type": "text", "text": prompt}]
-                + content_parts(images, self.image_format, self.jpeg_quality),
-            },
+            {"role": "user", "content": [{"type": "text", "text": prompt}, *parts]},
         ]
         estimate = self._estimate_usd(prompt, len(images))
         resp, cost = await self._complete(messages, response_format(aspects, intent), estimate)
