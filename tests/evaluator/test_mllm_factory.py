@@ -35,6 +35,10 @@ def test_url_specs_and_shared_cache_and_budget():
     assert j.cache is cache and j.budget is budget
     assert make_judge("http://127.0.0.1:8123/v1").model == "default"
     assert make_judge("https://example.org/v1", model="m2").model == "m2"
+    # A provider spec with another base URL (a proxy); a URL spec ignores a second URL.
+    monkey = make_judge("ollama:llava", base_url="http://10.0.0.2:11434/v1")
+    assert monkey.base_url == "http://10.0.0.2:11434/v1/" and monkey.name == "ollama:llava"
+    assert make_judge("http://a:1/v1", base_url="http://b:2/v1").base_url == "http://a:1/v1/"
 
 
 @pytest.mark.parametrize("spec", ["", "gpt-4o", "anthropic:claude", "ftp://x"])

@@ -48,6 +48,7 @@ def make_judge(
 
     if spec.startswith(("http://", "https://")):
         url, _, model = spec.partition("#")
+        options.pop("base_url", None)  # the spec is the URL
         model = model or options.pop("model", None) or "default"
         options.pop("model", None)
         return MLLMJudge(model, base_url=url, cache=cache, budget=budget, **options)
