@@ -50,7 +50,8 @@ def test_key_never_leaks(oracle_images, tmp_path, caplog, no_env_keys):
     assert srv.stats.faults  # retries and refusals were logged along the way
     assert len(VerdictCache(path)) > 0
     assert SECRET not in caplog.text
-    assert SECRET not in repr(judge) and SECRET not in str(judge.__dict__.get("name"))
+    assert SECRET not in repr(judge) and SECRET not in repr(vars(judge))
+    assert SECRET not in str(vars(judge)) and SECRET not in str(judge._api_key)
     assert SECRET not in str(exc.value) and SECRET not in repr(exc.value)
     for f in tmp_path.iterdir():
         assert SECRET.encode() not in f.read_bytes(), f.name
@@ -63,8 +64,8 @@ def test_missing_key_names_the_variable(no_env_keys):
     with pytest.raises(JudgeError, match="GEMINI_API_KEY"):
         make_judge("gemini:gemini-2.0-flash")
     # Local servers need none.
-    assert make_judge("ollama:llava")._api_key == NO_KEY
-    assert make_judge("http://127.0.0.1:9/v1")._api_key == NO_KEY
+    assert make_judge("ollama:llava")._api_key.reveal() == NO_KEY
+    assert make_judge("http://127.0.0.1:9/v1")._api_key.reveal() == NO_KEY
 
 
 def test_key_from_environment_then_config(no_env_keys, monkeypatch):

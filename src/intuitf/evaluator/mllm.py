@@ -47,7 +47,7 @@ from intuitf.evaluator.compose import ImageFormat, Layout, comparison_images, co
 from intuitf.evaluator.parsing import UnreadableAnswer, parse_answer
 from intuitf.evaluator.pricing import PriceTable
 from intuitf.evaluator.prompts import SYSTEM_PROMPT, response_format, user_prompt
-from intuitf.evaluator.providers import CUSTOM, ProviderPreset, preset, require_api_key
+from intuitf.evaluator.providers import CUSTOM, ProviderPreset, Secret, preset, require_api_key
 from intuitf.evaluator.types import Aspect, Choice, Cost, Intent, Verdict
 
 log = logging.getLogger(__name__)
@@ -130,7 +130,7 @@ class MLLMJudge:
         self.model = model or p.default_model
         self.base_url = (base_url or p.base_url).rstrip("/") + "/"
         self.name = name or f"{p.name}:{self.model}"
-        self._api_key = require_api_key(p, api_key)
+        self._api_key = Secret(require_api_key(p, api_key))
         self.swap: SwapMode = swap
         self.compose: Layout = compose
         self.image_format: ImageFormat = image_format
@@ -167,7 +167,10 @@ class MLLMJudge:
         loop = asyncio.get_running_loop()
         if self._loop is not loop or self._client is None or self._sem is None:
             self._client = AsyncOpenAI(
-                api_key=self._api_key, base_url=self.base_url, max_retries=0, timeout=self.timeout
+                api_key=self._api_key.reveal(),
+                base_url=self.base_url,
+                max_retries=0,
+                timeout=self.timeout,
             )
             self._sem = asyncio.Semaphore(self.max_concurrency)
             self._loop = loop
@@ -180,7 +183,7 @@ class MLLMJudge:
             self._client = None
 
     def _redact(self, text: str) -> str:
-        key = self._api_key
+        key = self._api_key.reveal()
         if key and len(key) >= 4:
             text = text.replace(key, "***")
         return text

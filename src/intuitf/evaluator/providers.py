@@ -79,6 +79,26 @@ PROVIDERS: dict[str, ProviderPreset] = {
 CUSTOM = ProviderPreset("url", "", ("INTUITF_API_KEY",), "default", needs_key=False)
 
 
+class Secret:
+    """A value that does not show itself: repr and str are "***"; :meth:`reveal` gives it."""
+
+    __slots__ = ("_value",)
+
+    def __init__(self, value: str) -> None:
+        self._value = value
+
+    def reveal(self) -> str:
+        return self._value
+
+    def __repr__(self) -> str:
+        return "Secret('***')"
+
+    __str__ = __repr__
+
+    def __reduce__(self):  # never pickled along with a judge
+        raise TypeError("a Secret cannot be pickled")
+
+
 def preset(name: str) -> ProviderPreset:
     """The preset named ``name``; :class:`JudgeError` if there is none."""
     try:
