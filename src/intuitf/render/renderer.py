@@ -17,7 +17,7 @@ from intuitf.volume.volume import Volume
 #: empty-space skipping. 300 such samples would block under 0.3 % of the light (< 1/255).
 ALPHA_EPSILON = 1e-5
 #: Rays stop once their transmittance drops below this: what is lost stays under 1/255.
-EARLY_STOP = 1.0 / 512.0
+EARLY_STOP = 1.0 / 255.0
 #: Block edge (cells) of the empty-space-skipping grid of the direct renderer.
 BLOCK_SIZE = 8
 
