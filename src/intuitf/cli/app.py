@@ -39,7 +39,10 @@ err_console = Console(stderr=True)
 def main(argv: list[str] | None = None) -> None:
     """Entry point: run the app and turn user errors into a message and exit code 2."""
     try:
-        app(args=argv, standalone_mode=False)
+        rc = app(args=argv, standalone_mode=False)
+        # With standalone_mode off, click returns a command's typer.Exit code instead of exiting.
+        if isinstance(rc, int) and rc != 0:
+            sys.exit(rc)
     except IntuitfError as exc:
         err_console.print(f"[bold red]error:[/] {exc.message}", highlight=False)
         if exc.hint:

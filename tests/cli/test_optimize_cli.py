@@ -1,0 +1,140 @@
+"""`intuitf optimize` end to end: offline judge, a model server over HTTP, kill and resume."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from intuitf.testing.fake_mllm import FakeMLLMServer
+
+COMMON = ["--population", "8", "--generations", "4", "--size", "64", "--output-size", "64",
+          "--top", "1", "--seed", "1", "--text", "red bone, faint blue skin"]
+
+
+def _intuitf(*args, check=True, timeout=240):
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.run([sys.executable, "-m", "intuitf", *args], capture_output=True, text=True,
+                          timeout=timeout, env=env)
+    if check and proc.returncode != 0:
+        raise AssertionError(f"exit {proc.returncode}\n{proc.stdout}\n{proc.stderr}")
+    return proc
+
+
+def _best(run: Path) -> dict:
+    return json.loads((run / "best" / "rank01.tf.json").read_text())
+
+
+def _generations(run: Path) -> list[int]:
+    out = []
+    if (run / "journal.jsonl").exists():
+        for line in (run / "journal.jsonl").read_text().splitlines():
+            try:
+                e = json.loads(line)
+            except json.JSONDecodeError:
+                continue
+            if e.get("type") == "generation":
+                out.append(e["generation"])
+    return out
+
+
+def _target() -> np.ndarray:
+    y, x = np.mgrid[0:64, 0:64]
+    img = np.zeros((64, 64, 3), np.uint8)
+    disc = (x - 32) ** 2 + (y - 32) ** 2 < 18**2
+    img[disc] = (200, 60, 40)
+    return img
+
+
+def test_optimize_with_metric_judge_writes_a_run(tmp_path):
+    run = tmp_path / "run"
+    proc = _intuitf("optimize", "phantom", *COMMON, "-o", str(run))
+    assert "Best transfer functions" in proc.stdout
+    assert (run / "report.html").exists() and (run / "best" / "rank01.vp").exists()
+    assert _generations(run) == [0, 1, 2, 3]
+    # A second optimize into the same folder is refused with advice, not a traceback.
+    again = _intuitf("optimize", "phantom", *COMMON, "-o", str(run), check=False)
+    assert again.returncode == 2 and "--resume" in again.stderr and "Traceback" not in again.stderr
+
+
+def test_bad_volume_is_one_clear_message(tmp_path):
+    bad = tmp_path / "scan_10x10x10_uint8.raw"
+    bad.write_bytes(b"\0" * 999)
+    proc = _intuitf("optimize", str(bad), "-o", str(tmp_path / "r"), check=False)
+    assert proc.returncode == 2
+    assert "Traceback" not in proc.stderr and "1000" in proc.stderr
+
+
+@pytest.mark.slow
+def test_killed_run_resumes_with_nothing_repeated(tmp_path):
+    with FakeMLLMServer(target=_target(), latency=0.01) as srv:
+        spec = ["--evaluator", srv.base_url]
+        ref = tmp_path / "ref"
+        _intuitf("optimize", "phantom", *COMMON, *spec, "-o", str(ref))
+        uninterrupted_requests = srv.stats.requests
+        assert uninterrupted_requests > 0
+
+        run = tmp_path / "killed"
+        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "intuitf", "optimize", "phantom", *COMMON, *spec, "-o", str(run)],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
+        )
+        deadline = time.time() + 180
+        while time.time() < deadline and not _generations(run):
+            time.sleep(0.05)
+        time.sleep(0.15)  # let it get into the middle of the next generation
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=30)
+        assert _generations(run), "the run never finished a generation"
+        before = srv.stats.requests
+        with sqlite3.connect(run / "verdicts.sqlite") as db:
+            paid = db.execute("SELECT COUNT(*) FROM answers").fetchone()[0]
+
+        _intuitf("optimize", "--resume", str(run))
+        asked_after_resume = srv.stats.requests - before
+        # Every question answered before the kill came from the cache; only the rest was asked.
+        assert asked_after_resume == uninterrupted_requests - paid
+        assert _best(run) == _best(ref)
+
+
+def test_ctrl_c_saves_and_says_how_to_resume(tmp_path):
+    with FakeMLLMServer(target=_target(), latency=0.05) as srv:
+        run = tmp_path / "run"
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "intuitf", "optimize", "phantom", *COMMON, "--evaluator", srv.base_url,
+             "-o", str(run)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            env=dict(os.environ, PYTHONUNBUFFERED="1"),
+        )
+        deadline = time.time() + 180
+        while time.time() < deadline and not (run / "checkpoint.json").exists():
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+        assert proc.returncode == 130, (out, err)
+        assert "Traceback" not in err
+        assert "--resume" in out
+        journal = [json.loads(x) for x in (run / "journal.jsonl").read_text().splitlines()]
+        assert journal[-1]["type"] == "end" and journal[-1]["reason"] == "interrupted"
+        assert json.loads((run / "checkpoint.json").read_text())["generation"] >= 1
+
+
+def test_lost_model_server_ends_cleanly(tmp_path):
+    with FakeMLLMServer(target=_target()) as srv:
+        url = srv.base_url
+    # The server is gone now: nothing listens on that port any more.
+    run = tmp_path / "run"
+    proc = _intuitf("optimize", "phantom", *COMMON, "--evaluator", url, "-o", str(run), check=False)
+    assert proc.returncode == 3, (proc.stdout, proc.stderr)
+    assert "Traceback" not in proc.stderr
+    assert "--resume" in proc.stdout
+    assert (run / "run.json").exists()
