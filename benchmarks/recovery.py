@@ -32,7 +32,11 @@ from intuitf.testing.fake_mllm import FakeMLLMServer
 from intuitf.tf import Gaussian, GaussianTF
 from intuitf.volume import load_volume
 
-DATA = Path(os.environ.get("INTUITF_DATA", Path(__file__).resolve().parents[2] / "shared" / "data" / "volumes"))
+DATA = Path(
+    os.environ.get(
+        "INTUITF_DATA", Path(__file__).resolve().parents[2] / "shared" / "data" / "volumes"
+    )
+)
 
 #: Hidden targets, in normalised units: a faint outer material and an opaque inner one.
 TARGETS = {
@@ -61,7 +65,11 @@ def similarity(image: np.ndarray, target: np.ndarray) -> tuple[float, float]:
 
 def run_method(vol, target_img, server, method, population, generations, size, seed):
     judge = MLLMJudge(
-        "default", base_url=server.base_url, cache=VerdictCache(":memory:"), max_concurrency=32, timeout=30
+        "default",
+        base_url=server.base_url,
+        cache=VerdictCache(":memory:"),
+        max_concurrency=32,
+        timeout=30,
     )
     settings = RunSettings(
         population=population,
@@ -81,15 +89,22 @@ def run_method(vol, target_img, server, method, population, generations, size, s
         best_img = session.image(rec.best_id, session.tfs[rec.best_id])
         ssim, de = similarity(best_img, target_img)
         rows.append(
-            dict(generation=rec.generation, ssim=ssim, delta_e=de, calls=session.cost.calls,
-                 seconds=time.perf_counter() - t0)
+            dict(
+                generation=rec.generation,
+                ssim=ssim,
+                delta_e=de,
+                calls=session.cost.calls,
+                seconds=time.perf_counter() - t0,
+            )
         )
     session.close()
     return rows
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--generations", type=int, default=12)
     ap.add_argument("--population", type=int, default=32)
@@ -106,23 +121,35 @@ def main() -> int:
     for name in volumes:
         vol = load_volume(DATA / name)
         target_tf = TARGETS[name]
-        target_img = VolumeRenderer(vol, size=args.size, shading=False).sample_cache(
-            __import__("intuitf.render", fromlist=["Camera"]).Camera()
-        ).render(target_tf)
-        with FakeMLLMServer(target=target_img, noise=0.10, position_bias=0.20, seed=args.seed) as srv:
+        target_img = (
+            VolumeRenderer(vol, size=args.size, shading=False)
+            .sample_cache(__import__("intuitf.render", fromlist=["Camera"]).Camera())
+            .render(target_tf)
+        )
+        with FakeMLLMServer(
+            target=target_img, noise=0.10, position_bias=0.20, seed=args.seed
+        ) as srv:
             for method in methods:
-                rows = run_method(vol, target_img, srv, method, args.population, gens, args.size, args.seed)
+                rows = run_method(
+                    vol, target_img, srv, method, args.population, gens, args.size, args.seed
+                )
                 results[(name, method)] = rows
                 last = rows[-1]
-                print(f"{name.split('_')[0]:8s} {method:9s} final SSIM {last['ssim']:.3f}  ΔE {last['delta_e']:.1f}  "
-                      f"calls {last['calls']}  {last['seconds']:.0f}s", flush=True)
+                print(
+                    f"{name.split('_')[0]:8s} {method:9s} final SSIM {last['ssim']:.3f}  ΔE {last['delta_e']:.1f}  "
+                    f"calls {last['calls']}  {last['seconds']:.0f}s",
+                    flush=True,
+                )
             if not (args.quick or args.no_population_study):
                 for pop in (10, 25, 50):
                     rows = run_method(vol, target_img, srv, "ga", pop, gens, args.size, args.seed)
                     results[(name, f"ga-pop{pop}")] = rows
                     last = rows[-1]
-                    print(f"{name.split('_')[0]:8s} ga pop {pop:<3d} final SSIM {last['ssim']:.3f}  ΔE {last['delta_e']:.1f}  "
-                          f"calls {last['calls']}  {last['seconds']:.0f}s", flush=True)
+                    print(
+                        f"{name.split('_')[0]:8s} ga pop {pop:<3d} final SSIM {last['ssim']:.3f}  ΔE {last['delta_e']:.1f}  "
+                        f"calls {last['calls']}  {last['seconds']:.0f}s",
+                        flush=True,
+                    )
 
     print("\nPer generation: SSIM of the best individual / cumulative paid calls")
     header = "volume   method      " + " ".join(f"g{g:02d}      " for g in range(gens))
@@ -143,7 +170,13 @@ def main() -> int:
             ax = fig.add_subplot(1, len(volumes), i + 1)
             for (n, method), rows in results.items():
                 if n == name and not method.startswith("ga-pop"):
-                    ax.plot([r["calls"] for r in rows], [r["ssim"] for r in rows], marker="o", ms=3, label=method)
+                    ax.plot(
+                        [r["calls"] for r in rows],
+                        [r["ssim"] for r in rows],
+                        marker="o",
+                        ms=3,
+                        label=method,
+                    )
             ax.axhline(0.9, color="grey", lw=0.8, ls="--")
             ax.set_title(name.split("_")[0])
             ax.set_xlabel("paid judge calls")

@@ -16,14 +16,33 @@ import pytest
 
 from intuitf.testing.fake_mllm import FakeMLLMServer
 
-COMMON = ["--population", "8", "--generations", "4", "--size", "64", "--output-size", "64",
-          "--top", "1", "--seed", "1", "--text", "red bone, faint blue skin"]
+COMMON = [
+    "--population",
+    "8",
+    "--generations",
+    "4",
+    "--size",
+    "64",
+    "--output-size",
+    "64",
+    "--top",
+    "1",
+    "--seed",
+    "1",
+    "--text",
+    "red bone, faint blue skin",
+]
 
 
 def _intuitf(*args, check=True, timeout=240):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    proc = subprocess.run([sys.executable, "-m", "intuitf", *args], capture_output=True, text=True,
-                          timeout=timeout, env=env)
+    proc = subprocess.run(
+        [sys.executable, "-m", "intuitf", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=env,
+    )
     if check and proc.returncode != 0:
         raise AssertionError(f"exit {proc.returncode}\n{proc.stdout}\n{proc.stderr}")
     return proc
@@ -85,8 +104,20 @@ def test_killed_run_resumes_with_nothing_repeated(tmp_path):
         run = tmp_path / "killed"
         env = dict(os.environ, PYTHONUNBUFFERED="1")
         proc = subprocess.Popen(
-            [sys.executable, "-m", "intuitf", "optimize", "phantom", *COMMON, *spec, "-o", str(run)],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
+            [
+                sys.executable,
+                "-m",
+                "intuitf",
+                "optimize",
+                "phantom",
+                *COMMON,
+                *spec,
+                "-o",
+                str(run),
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            env=env,
         )
         deadline = time.time() + 180
         while time.time() < deadline and not _generations(run):
@@ -110,9 +141,21 @@ def test_ctrl_c_saves_and_says_how_to_resume(tmp_path):
     with FakeMLLMServer(target=_target(), latency=0.05) as srv:
         run = tmp_path / "run"
         proc = subprocess.Popen(
-            [sys.executable, "-m", "intuitf", "optimize", "phantom", *COMMON, "--evaluator", srv.base_url,
-             "-o", str(run)],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            [
+                sys.executable,
+                "-m",
+                "intuitf",
+                "optimize",
+                "phantom",
+                *COMMON,
+                "--evaluator",
+                srv.base_url,
+                "-o",
+                str(run),
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
             env=dict(os.environ, PYTHONUNBUFFERED="1"),
         )
         deadline = time.time() + 180

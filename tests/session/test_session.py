@@ -49,8 +49,16 @@ def test_run_folder_has_every_output(vol, tmp_path):
     assert [e["generation"] for e in gens] == [0, 1, 2, 3]
     assert all(len(e["candidates"]) == 8 for e in gens)
     assert rd.read_journal()[-1]["type"] == "end"
-    for name in ("rank01.png", "rank01.tf.json", "rank01.tf.png", "rank01.paraview.json",
-                 "rank01.vp", "rank01.vtk.py", "rank01.1dt", "rank02.png"):
+    for name in (
+        "rank01.png",
+        "rank01.tf.json",
+        "rank01.tf.png",
+        "rank01.paraview.json",
+        "rank01.vp",
+        "rank01.vtk.py",
+        "rank01.1dt",
+        "rank02.png",
+    ):
         assert (run / "best" / name).stat().st_size > 0, name
     assert (run / "generations" / "gen003.png").exists()
     assert (run / "evolution.png").exists()
@@ -61,13 +69,17 @@ def test_run_folder_has_every_output(vol, tmp_path):
 
 
 def test_interrupted_run_resumes_to_the_same_result(vol, tmp_path):
-    ref = Session.create(vol, intent=_intent(), settings=RunSettings(**SETTINGS), run_dir=tmp_path / "a").run()
+    ref = Session.create(
+        vol, intent=_intent(), settings=RunSettings(**SETTINGS), run_dir=tmp_path / "a"
+    ).run()
 
     def interrupt_in_generation_2(event):
         if event.kind == "round" and event.generation == 2:
             raise KeyboardInterrupt
 
-    s = Session.create(vol, intent=_intent(), settings=RunSettings(**SETTINGS), run_dir=tmp_path / "b")
+    s = Session.create(
+        vol, intent=_intent(), settings=RunSettings(**SETTINGS), run_dir=tmp_path / "b"
+    )
     out = s.run(interrupt_in_generation_2)
     assert out.reason == "interrupted" and out.generations_done == 2
     resumed = Session.resume(tmp_path / "b", vol, s.judge)
@@ -95,7 +107,9 @@ def test_budget_stop_is_clean_and_saved(vol, tmp_path):
     from intuitf.evaluator.metric import MetricJudge
 
     judge = BrokeJudge(MetricJudge(), calls=40)
-    s = Session.create(vol, intent=_intent(), judge=judge, settings=RunSettings(**SETTINGS), run_dir=tmp_path / "r")
+    s = Session.create(
+        vol, intent=_intent(), judge=judge, settings=RunSettings(**SETTINGS), run_dir=tmp_path / "r"
+    )
     out = s.run()
     assert out.reason == "budget"
     assert 1 <= out.generations_done < 4

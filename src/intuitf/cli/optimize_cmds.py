@@ -24,8 +24,16 @@ def _build_intent(text, image, sketch, on, about):
 
     if sketch is not None:
         if on is None:
-            raise IntuitfError("--sketch needs --on BASE.png: the rendering the strokes were drawn on.")
-        return Intent(kind="sketch", text=text, sketch=load_image_rgba(sketch), base=load_image(on), about=about)
+            raise IntuitfError(
+                "--sketch needs --on BASE.png: the rendering the strokes were drawn on."
+            )
+        return Intent(
+            kind="sketch",
+            text=text,
+            sketch=load_image_rgba(sketch),
+            base=load_image(on),
+            about=about,
+        )
     if image is not None:
         return Intent(kind="image", text=text, reference=load_image(image), about=about)
     if text:
@@ -50,7 +58,9 @@ def _make_judge(spec: str, run_dir: Path, base_url, budget_usd, budget_calls, sp
     if spec == "metric":
         return make_judge(spec)
     run_dir.mkdir(parents=True, exist_ok=True)
-    return make_judge(spec, cache=VerdictCache(run_dir / "verdicts.sqlite"), budget=budget, **options)
+    return make_judge(
+        spec, cache=VerdictCache(run_dir / "verdicts.sqlite"), budget=budget, **options
+    )
 
 
 class _ProgressView:
@@ -62,7 +72,9 @@ class _ProgressView:
 
     def __call__(self, e) -> None:
         if self.task is None:
-            self.task = self.progress.add_task("starting", total=e.generations, completed=e.generation)
+            self.task = self.progress.add_task(
+                "starting", total=e.generations, completed=e.generation
+            )
         left = ""
         if e.seconds_per_generation:
             remaining = (e.generations - e.generation) * e.seconds_per_generation
@@ -103,7 +115,10 @@ def _print_summary(outcome, session, started: float) -> None:
     table.add_column("Gaussians (mean in data units, opacity)")
     lo, hi = session.volume.value_range
     for i, (tf, rating) in enumerate(outcome.best, start=1):
-        desc = ", ".join(f"{lo + g.mean * (hi - lo):.4g}:{g.height:.2f}" for g in sorted(tf.gaussians, key=lambda g: g.mean))
+        desc = ", ".join(
+            f"{lo + g.mean * (hi - lo):.4g}:{g.height:.2f}"
+            for g in sorted(tf.gaussians, key=lambda g: g.mean)
+        )
         table.add_row(str(i), f"{rating:.0f}", desc)
     console.print(table)
     c = outcome.cost
@@ -114,7 +129,9 @@ def _print_summary(outcome, session, started: float) -> None:
     if outcome.run_dir is not None:
         color = "green" if outcome.completed else "yellow"
         console.print(f"[{color}]{outcome.message}[/]")
-        console.print(f"Results: [bold]{outcome.run_dir}[/]  (report: {outcome.run_dir / 'report.html'})")
+        console.print(
+            f"Results: [bold]{outcome.run_dir}[/]  (report: {outcome.run_dir / 'report.html'})"
+        )
         if not outcome.completed:
             console.print(f"Continue with: intuitf optimize --resume {outcome.run_dir}")
 
@@ -122,34 +139,64 @@ def _print_summary(outcome, session, started: float) -> None:
 def register(app: typer.Typer) -> None:
     @app.command()
     def optimize(
-        volume: str = typer.Argument(None, help="Volume file or folder (or 'phantom'). Not needed with --resume."),
+        volume: str = typer.Argument(
+            None, help="Volume file or folder (or 'phantom'). Not needed with --resume."
+        ),
         text: str = typer.Option(None, "--text", help="What you want, in words."),
-        image: Path = typer.Option(None, "--image", help="A reference picture whose style to match."),
-        sketch: Path = typer.Option(None, "--sketch", help="Coloured strokes (PNG with transparency)."),
+        image: Path = typer.Option(
+            None, "--image", help="A reference picture whose style to match."
+        ),
+        sketch: Path = typer.Option(
+            None, "--sketch", help="Coloured strokes (PNG with transparency)."
+        ),
         on: Path = typer.Option(None, "--on", help="The rendering the sketch was drawn on."),
-        about: str = typer.Option(None, "--about", help="What the volume is, e.g. 'a CT of a human foot'."),
-        evaluator: str = typer.Option("metric", "--evaluator", help="metric | openai:MODEL | gemini:MODEL | ollama:MODEL | vllm:MODEL | lmstudio:MODEL | openrouter:MODEL | URL"),
-        base_url: str = typer.Option(None, "--base-url", help="Server URL for an OpenAI-compatible model."),
+        about: str = typer.Option(
+            None, "--about", help="What the volume is, e.g. 'a CT of a human foot'."
+        ),
+        evaluator: str = typer.Option(
+            "metric",
+            "--evaluator",
+            help="metric | openai:MODEL | gemini:MODEL | ollama:MODEL | vllm:MODEL | lmstudio:MODEL | openrouter:MODEL | URL",
+        ),
+        base_url: str = typer.Option(
+            None, "--base-url", help="Server URL for an OpenAI-compatible model."
+        ),
         population: int = typer.Option(32, "--population"),
         generations: int = typer.Option(12, "--generations"),
         gaussians: int = typer.Option(5, "--gaussians"),
-        budget_usd: float = typer.Option(None, "--budget-usd", help="Stop cleanly before spending more."),
-        budget_calls: int = typer.Option(None, "--budget-calls", help="Stop cleanly before more model calls."),
+        budget_usd: float = typer.Option(
+            None, "--budget-usd", help="Stop cleanly before spending more."
+        ),
+        budget_calls: int = typer.Option(
+            None, "--budget-calls", help="Stop cleanly before more model calls."
+        ),
         seed: int = typer.Option(0, "--seed"),
         explorer: str = typer.Option("ga", "--explorer", help="ga | cmaes | random | paper-ga"),
-        protocol: str = typer.Option("efficient", "--protocol", help="efficient | paper (tournament)"),
+        protocol: str = typer.Option(
+            "efficient", "--protocol", help="efficient | paper (tournament)"
+        ),
         size: int = typer.Option(256, "--size", help="Image size for judging."),
-        output_size: int = typer.Option(512, "--output-size", help="Image size of the best renderings."),
+        output_size: int = typer.Option(
+            512, "--output-size", help="Image size of the best renderings."
+        ),
         top: int = typer.Option(4, "--top", help="How many best TFs to keep."),
         shading: bool = typer.Option(True, "--shading/--no-shading"),
         azimuth: float = typer.Option(None, "--azimuth"),
         elevation: float = typer.Option(None, "--elevation"),
-        start_from: list[Path] = typer.Option(None, "--start-from", help="TF JSON to include in the first population (repeatable)."),
-        output: Path = typer.Option(None, "-o", "--output", help="Run folder (default: runs/<volume>-<time>)."),
+        start_from: list[Path] = typer.Option(
+            None, "--start-from", help="TF JSON to include in the first population (repeatable)."
+        ),
+        output: Path = typer.Option(
+            None, "-o", "--output", help="Run folder (default: runs/<volume>-<time>)."
+        ),
         resume: Path = typer.Option(None, "--resume", help="Continue the run in this folder."),
-        overwrite: bool = typer.Option(False, "--overwrite", help="Replace a run already in the output folder."),
+        overwrite: bool = typer.Option(
+            False, "--overwrite", help="Replace a run already in the output folder."
+        ),
         shape: str = typer.Option(None, "--shape", help="Raw files: X,Y,Z"),
-        dtype: str = typer.Option(None, "--dtype", help="Raw files: uint8, uint16, int16, float32, ..."),
+        dtype: str = typer.Option(
+            None, "--dtype", help="Raw files: uint8, uint16, int16, float32, ..."
+        ),
         byte_order: str = typer.Option(None, "--byte-order", help="Raw files: little | big"),
         spacing: str = typer.Option(None, "--spacing", help="Voxel spacing X,Y,Z"),
         max_dim: int = typer.Option(None, "--max-dim", help="Downsample volumes larger than this."),
@@ -163,20 +210,43 @@ def register(app: typer.Typer) -> None:
         else:
             if volume is None:
                 raise IntuitfError("Give a VOLUME to optimize (or 'phantom'), or --resume RUN_DIR.")
-            vol_args = dict(shape=shape, dtype=dtype, byte_order=byte_order, spacing=spacing, max_dim=max_dim)
+            vol_args = dict(
+                shape=shape, dtype=dtype, byte_order=byte_order, spacing=spacing, max_dim=max_dim
+            )
             vol = open_volume(volume, **vol_args)
             for note in vol.notes:
                 console.print(f"[yellow]note:[/] {note}")
             intent = _build_intent(text, image, sketch, on, about)
             run_dir = output or Path("runs") / f"{vol.name}-{time.strftime('%Y%m%d-%H%M%S')}"
             session = _new_session(
-                vol, intent, evaluator, base_url, run_dir,
-                dict(population=population, generations=generations, n_gaussians=gaussians, seed=seed,
-                     explorer=explorer, protocol=protocol, image_size=size, output_size=output_size,
-                     top_k=top, shading=shading,
-                     camera=_camera_dict(azimuth, elevation)),
-                budget_usd, budget_calls, start_from or [], overwrite,
-                {"volume_source": volume, "volume_args": vol_args, "evaluator": evaluator, "base_url": base_url},
+                vol,
+                intent,
+                evaluator,
+                base_url,
+                run_dir,
+                dict(
+                    population=population,
+                    generations=generations,
+                    n_gaussians=gaussians,
+                    seed=seed,
+                    explorer=explorer,
+                    protocol=protocol,
+                    image_size=size,
+                    output_size=output_size,
+                    top_k=top,
+                    shading=shading,
+                    camera=_camera_dict(azimuth, elevation),
+                ),
+                budget_usd,
+                budget_calls,
+                start_from or [],
+                overwrite,
+                {
+                    "volume_source": volume,
+                    "volume_args": vol_args,
+                    "evaluator": evaluator,
+                    "base_url": base_url,
+                },
             )
         console.print(
             f"Optimizing [bold]{session.volume.name}[/] with {getattr(session.judge, 'name', 'judge')}: "
@@ -190,7 +260,9 @@ def register(app: typer.Typer) -> None:
 
     @app.command()
     def demo(
-        output: Path = typer.Option(Path("intuitf-output/demo"), "-o", "--output", help="Run folder."),
+        output: Path = typer.Option(
+            Path("intuitf-output/demo"), "-o", "--output", help="Run folder."
+        ),
         generations: int = typer.Option(8, "--generations"),
         population: int = typer.Option(24, "--population"),
     ) -> None:
@@ -201,17 +273,40 @@ def register(app: typer.Typer) -> None:
         started = time.perf_counter()
         vol = phantom()
         intent = Intent(kind="text", text=DEMO_TEXT, about=DEMO_ABOUT)
-        console.print(f"Demo: optimizing the built-in phantom for “{DEMO_TEXT}” with the offline metric judge.")
+        console.print(
+            f"Demo: optimizing the built-in phantom for “{DEMO_TEXT}” with the offline metric judge."
+        )
         session = _new_session(
-            vol, intent, "metric", None, output,
-            dict(population=population, generations=generations, seed=0, image_size=160, output_size=384, top_k=4),
-            None, None, [], True,
-            {"volume_source": "phantom", "volume_args": {}, "evaluator": "metric", "base_url": None},
+            vol,
+            intent,
+            "metric",
+            None,
+            output,
+            dict(
+                population=population,
+                generations=generations,
+                seed=0,
+                image_size=160,
+                output_size=384,
+                top_k=4,
+            ),
+            None,
+            None,
+            [],
+            True,
+            {
+                "volume_source": "phantom",
+                "volume_args": {},
+                "evaluator": "metric",
+                "base_url": None,
+            },
         )
         outcome = _run_with_progress(session)
         _print_summary(outcome, session, started)
         if outcome.run_dir is not None:
-            console.print(f"Open {outcome.run_dir / 'report.html'} in a browser to see the results.")
+            console.print(
+                f"Open {outcome.run_dir / 'report.html'} in a browser to see the results."
+            )
 
 
 def _camera_dict(azimuth, elevation) -> dict:
@@ -227,7 +322,19 @@ def _camera_dict(azimuth, elevation) -> dict:
     return Camera(**d).to_dict()
 
 
-def _new_session(vol, intent, evaluator, base_url, run_dir, settings_kw, budget_usd, budget_calls, start_from, overwrite, record):
+def _new_session(
+    vol,
+    intent,
+    evaluator,
+    base_url,
+    run_dir,
+    settings_kw,
+    budget_usd,
+    budget_calls,
+    start_from,
+    overwrite,
+    record,
+):
     from intuitf.session import RunSettings, Session
     from intuitf.tf import load_tf
 
@@ -242,8 +349,14 @@ def _new_session(vol, intent, evaluator, base_url, run_dir, settings_kw, budget_
     judge = _make_judge(evaluator, run_dir, base_url, budget_usd, budget_calls)
     initial = [load_tf(p) for p in start_from]
     return Session.create(
-        vol, intent=intent, judge=judge, settings=settings, run_dir=run_dir,
-        initial=initial, overwrite=overwrite, extra_record=record,
+        vol,
+        intent=intent,
+        judge=judge,
+        settings=settings,
+        run_dir=run_dir,
+        initial=initial,
+        overwrite=overwrite,
+        extra_record=record,
     )
 
 
@@ -258,8 +371,14 @@ def _resume_session(run_dir: Path, budget_usd, budget_calls, base_url):
     from intuitf.evaluator.types import Cost
 
     spent = Cost(**ckpt.get("cost", {})) if ckpt else None
-    judge = _make_judge(record.get("evaluator", "metric"), rd.root, base_url or record.get("base_url"),
-                        budget_usd, budget_calls, spent)
+    judge = _make_judge(
+        record.get("evaluator", "metric"),
+        rd.root,
+        base_url or record.get("base_url"),
+        budget_usd,
+        budget_calls,
+        spent,
+    )
     session = Session.resume(rd.root, vol, judge)
     if session.done:
         console.print("[green]This run is already complete.[/] Rewriting its outputs.")

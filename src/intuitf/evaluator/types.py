@@ -8,13 +8,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from enum import Enum
+from enum import StrEnum
 from typing import Literal, Protocol, runtime_checkable
 
 import numpy as np
 
 
-class Choice(str, Enum):
+class Choice(StrEnum):
     """Which of two images is better on an aspect (or overall)."""
 
     FIRST = "first"
@@ -28,7 +28,9 @@ class Choice(str, Enum):
 
     def swapped(self) -> Choice:
         """The same choice seen with the two images in the other order."""
-        return {Choice.FIRST: Choice.SECOND, Choice.SECOND: Choice.FIRST, Choice.TIE: Choice.TIE}[self]
+        return {Choice.FIRST: Choice.SECOND, Choice.SECOND: Choice.FIRST, Choice.TIE: Choice.TIE}[
+            self
+        ]
 
 
 @dataclass(frozen=True)
@@ -165,7 +167,9 @@ class Verdict:
         )
 
 
-def weighted_overall(per_aspect: dict[str, Choice], aspects: Sequence[Aspect]) -> tuple[Choice, float]:
+def weighted_overall(
+    per_aspect: dict[str, Choice], aspects: Sequence[Aspect]
+) -> tuple[Choice, float]:
     """Combine per-aspect choices by aspect weight into an overall choice and P(first better)."""
     weights = {a.key: a.weight for a in aspects}
     total = sum(weights.get(k, 1.0) for k in per_aspect) or 1.0

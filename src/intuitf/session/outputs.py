@@ -59,7 +59,9 @@ def write_run_outputs(session: Session) -> None:
         atomic_write_bytes(stem.with_name(stem.name + ".tf.json"), tf.to_json().encode())
         atomic_write_bytes(stem.with_name(stem.name + ".tf.png"), tf_plot(tf, counts))
         for fmt, suffix in EXPORT_FORMATS.items():
-            atomic_write_bytes(stem.with_name(stem.name + suffix), export_tf(tf, fmt, unit_distance=unit).encode())
+            atomic_write_bytes(
+                stem.with_name(stem.name + suffix), export_tf(tf, fmt, unit_distance=unit).encode()
+            )
         summary.append({"rank": rank, "rating": rating, "tf": f"best/rank{rank:02d}.tf.json"})
     atomic_write_json(rd.best_dir / "summary.json", summary)
     records = evolution_records(rd.read_journal())

@@ -109,7 +109,9 @@ class RunDirectory:
         try:
             self.root.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            raise SessionError(f"Cannot create the run folder {self.root}: {exc.strerror or exc}.") from exc
+            raise SessionError(
+                f"Cannot create the run folder {self.root}: {exc.strerror or exc}."
+            ) from exc
         if overwrite:
             for p in (self.journal, self.checkpoint):
                 p.unlink(missing_ok=True)

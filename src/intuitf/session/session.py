@@ -203,7 +203,9 @@ class Session:
                 }
             )
             rd.append_journal({"type": "stage", "generation": 0, "stage": plan[0][0]})
-        return cls(volume, intent=intent, judge=judge, settings=settings, run_dir=rd, explorer=explorer)
+        return cls(
+            volume, intent=intent, judge=judge, settings=settings, run_dir=rd, explorer=explorer
+        )
 
     @classmethod
     def resume(cls, run_dir: str | Path, volume: Volume, judge: Judge) -> Session:
@@ -277,7 +279,9 @@ class Session:
             self._images[candidate_id] = img
         return img
 
-    def render(self, tf: GaussianTF, *, size: int | None = None, camera=None, shading: bool | None = None) -> np.ndarray:
+    def render(
+        self, tf: GaussianTF, *, size: int | None = None, camera=None, shading: bool | None = None
+    ) -> np.ndarray:
         """Render any TF with the session's volume (and camera unless given)."""
         from intuitf.render import VolumeRenderer
 
@@ -285,7 +289,9 @@ class Session:
         shading = self.settings.shading if shading is None else shading
         if size == self.settings.image_size and camera is None and shading == self.settings.shading:
             return self.sample_cache().render(tf)
-        r = VolumeRenderer(self.volume, size=size, shading=shading, background=tuple(self.settings.background))
+        r = VolumeRenderer(
+            self.volume, size=size, shading=shading, background=tuple(self.settings.background)
+        )
         return r.render(tf, camera or self.camera)
 
     def best(self, k: int = 1) -> list[tuple[GaussianTF, float]]:
@@ -334,13 +340,21 @@ class Session:
             emit(self._event("round", round=round_index, rounds=rounds, cost=self.cost + cost))
 
         try:
-            result = self._run_async(tournament.run(images, ids, prior=prior or None, progress=on_round))
+            result = self._run_async(
+                tournament.run(images, ids, prior=prior or None, progress=on_round)
+            )
         except (BudgetExhausted, JudgeError) as exc:
             partial = getattr(exc, "partial", None)
             if partial is not None:
                 self.cost += partial.cost
-                self._journal({"type": "partial", "generation": g, "reason": type(exc).__name__,
-                               "tournament": _safe_dict(partial)})
+                self._journal(
+                    {
+                        "type": "partial",
+                        "generation": g,
+                        "reason": type(exc).__name__,
+                        "tournament": _safe_dict(partial),
+                    }
+                )
             raise
 
         fitness = None
@@ -407,7 +421,9 @@ class Session:
         emit(self._event("generation_end"))
         return record
 
-    def run(self, progress: Callable[[ProgressEvent], None] | None = None, *, write_outputs: bool = True) -> RunOutcome:
+    def run(
+        self, progress: Callable[[ProgressEvent], None] | None = None, *, write_outputs: bool = True
+    ) -> RunOutcome:
         """Run generations until the plan is done or something stops the run cleanly.
 
         Never raises for budget, model-server, disk or interrupt conditions: the outcome says
@@ -427,8 +443,15 @@ class Session:
             reason, message = "disk", str(exc)
         if self.run_dir is not None:
             try:
-                self._journal({"type": "end", "generation": self.generation, "reason": reason,
-                               "message": message, "cost": self.cost.to_dict()})
+                self._journal(
+                    {
+                        "type": "end",
+                        "generation": self.generation,
+                        "reason": reason,
+                        "message": message,
+                        "cost": self.cost.to_dict(),
+                    }
+                )
                 if write_outputs and self.last_ranking:
                     self.write_outputs()
             except IntuitfError as exc:  # e.g. the disk filled up while saving outputs
@@ -506,9 +529,9 @@ class Session:
     def _write_generation_sheet(self, g: int, candidates, ranking: list[str]) -> None:
         if self.run_dir is None:
             return
+        from intuitf.imageio import png_bytes
         from intuitf.plots import contact_sheet
         from intuitf.session.rundir import atomic_write_bytes
-        from intuitf.imageio import png_bytes
 
         order = {cid: i for i, cid in enumerate(ranking)}
         ordered = sorted(candidates, key=lambda c: order[c.id])
@@ -526,8 +549,12 @@ def _versions() -> dict:
 
     import intuitf
 
-    return {"intuitf": intuitf.__version__, "python": platform.python_version(),
-            "numpy": np.__version__, "numba": numba.__version__}
+    return {
+        "intuitf": intuitf.__version__,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "numba": numba.__version__,
+    }
 
 
 def _intent_record(intent: Intent) -> dict:

@@ -40,7 +40,9 @@ class RunSettings:
         if not 1 <= self.n_gaussians <= 16:
             raise SessionError(f"--gaussians must be within 1..16, got {self.n_gaussians}.")
         if not 32 <= self.image_size <= 2048 or not 32 <= self.output_size <= 4096:
-            raise SessionError("Image sizes must be within 32..2048 (judging) and 32..4096 (output).")
+            raise SessionError(
+                "Image sizes must be within 32..2048 (judging) and 32..4096 (output)."
+            )
         if self.top_k < 1:
             raise SessionError("--top must be at least 1.")
 

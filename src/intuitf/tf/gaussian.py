@@ -65,7 +65,9 @@ class Gaussian:
         except (TypeError, ValueError):
             col = ()  # not numbers: reported below
         if len(col) != 3 or not all(math.isfinite(c) and 0.0 <= c <= 1.0 for c in col):
-            raise TransferFunctionError(f"Gaussian color must be three values in [0, 1], got {self.color!r}.")
+            raise TransferFunctionError(
+                f"Gaussian color must be three values in [0, 1], got {self.color!r}."
+            )
         object.__setattr__(self, "color", col)
         object.__setattr__(self, "frozen", bool(self.frozen))
 
@@ -124,7 +126,9 @@ class GaussianTF:
             except (TypeError, ValueError):
                 lo = hi = math.nan  # not a pair of numbers: reported below
             if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
-                raise TransferFunctionError(f"value_range must be (low, high) with high > low, got {self.value_range!r}.")
+                raise TransferFunctionError(
+                    f"value_range must be (low, high) with high > low, got {self.value_range!r}."
+                )
             object.__setattr__(self, "value_range", (lo, hi))
 
     # -- evaluation -----------------------------------------------------------------------
@@ -199,7 +203,9 @@ class GaussianTF:
     def freeze(self, keep_free: Sequence[int]) -> GaussianTF:
         """Freeze every Gaussian except those at the indices ``keep_free``."""
         free = set(int(i) for i in keep_free)
-        return self.with_gaussians(replace(g, frozen=i not in free) for i, g in enumerate(self.gaussians))
+        return self.with_gaussians(
+            replace(g, frozen=i not in free) for i, g in enumerate(self.gaussians)
+        )
 
     def unfreeze(self) -> GaussianTF:
         return self.with_gaussians(replace(g, frozen=False) for g in self.gaussians)
@@ -226,14 +232,14 @@ class GaussianTF:
     def from_dict(cls, d: dict) -> GaussianTF:
         if not isinstance(d, dict) or d.get("format") != TF_FORMAT:
             raise TransferFunctionError(
-                "This is not an intuitf transfer function (missing \"format\": \"intuitf.gaussian-tf\").",
+                'This is not an intuitf transfer function (missing "format": "intuitf.gaussian-tf").',
                 "Use a TF JSON written by intuitf (optimize, export or the web app).",
             )
         try:
             version = int(d.get("version", 0))
         except (TypeError, ValueError) as exc:
             raise TransferFunctionError(
-                f"The transfer function's \"version\" must be a whole number, got {d.get('version')!r}."
+                f'The transfer function\'s "version" must be a whole number, got {d.get("version")!r}.'
             ) from exc
         if version > TF_VERSION:
             raise TransferFunctionError(
@@ -243,7 +249,7 @@ class GaussianTF:
             )
         gs = d.get("gaussians")
         if not isinstance(gs, list):
-            raise TransferFunctionError("A transfer function needs a list of \"gaussians\".")
+            raise TransferFunctionError('A transfer function needs a list of "gaussians".')
         vr = d.get("value_range")
         return cls(
             gaussians=tuple(Gaussian.from_dict(g) for g in gs),
