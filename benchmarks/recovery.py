@@ -26,7 +26,7 @@ from skimage.metrics import structural_similarity
 from intuitf.evaluator.cache import VerdictCache
 from intuitf.evaluator.mllm import MLLMJudge
 from intuitf.evaluator.types import Intent
-from intuitf.render import VolumeRenderer
+from intuitf.render import Camera, VolumeRenderer
 from intuitf.session import RunSettings, Session
 from intuitf.testing.fake_mllm import FakeMLLMServer
 from intuitf.tf import Gaussian, GaussianTF
@@ -38,21 +38,30 @@ DATA = Path(
     )
 )
 
-#: Hidden targets, in normalised units: a faint outer material and an opaque inner one.
+#: Hidden targets, in normalised units.
 TARGETS = {
+    # "A tooth with a blue crown, ivory dentin and a faint orange outline" (the embedding
+    # material around the tooth, near 0.30, is left out).
     "tooth_103x94x161_uint8.raw.gz": GaussianTF(
         (
-            Gaussian(0.32, 0.03, 0.04, (0.9, 0.45, 0.2)),
-            Gaussian(0.62, 0.04, 0.35, (0.95, 0.95, 0.85)),
-            Gaussian(0.85, 0.03, 0.8, (0.2, 0.5, 0.95)),
+            Gaussian(0.47, 0.03, 0.03, (0.95, 0.5, 0.2)),
+            Gaussian(0.64, 0.025, 0.12, (0.95, 0.92, 0.8)),
+            Gaussian(0.90, 0.03, 0.7, (0.2, 0.45, 0.95)),
         )
     ),
+    # "A blue translucent engine block with opaque orange dense parts".
     "engine_256x256x128_uint8.raw.gz": GaussianTF(
         (
-            Gaussian(0.38, 0.04, 0.03, (0.3, 0.6, 0.95)),
-            Gaussian(0.72, 0.03, 0.6, (0.95, 0.55, 0.15)),
+            Gaussian(0.50, 0.03, 0.03, (0.35, 0.6, 0.95)),
+            Gaussian(0.78, 0.025, 0.5, (0.95, 0.55, 0.15)),
         )
     ),
+}
+
+#: The view each volume is judged from.
+CAMERAS = {
+    "tooth_103x94x161_uint8.raw.gz": Camera(),
+    "engine_256x256x128_uint8.raw.gz": Camera(azimuth=35, elevation=30, zoom=1.4),
 }
 
 
@@ -63,7 +72,7 @@ def similarity(image: np.ndarray, target: np.ndarray) -> tuple[float, float]:
     return float(ssim), float(de.mean())
 
 
-def run_method(vol, target_img, server, method, population, generations, size, seed):
+def run_method(vol, camera, target_img, server, method, population, generations, size, seed):
     judge = MLLMJudge(
         "default",
         base_url=server.base_url,
@@ -79,6 +88,7 @@ def run_method(vol, target_img, server, method, population, generations, size, s
         output_size=size,
         seed=seed,
         shading=False,
+        camera=camera.to_dict(),
     )
     intent = Intent(kind="image", reference=target_img)
     session = Session.create(vol, intent=intent, judge=judge, settings=settings)
@@ -121,17 +131,22 @@ def main() -> int:
     for name in volumes:
         vol = load_volume(DATA / name)
         target_tf = TARGETS[name]
-        target_img = (
-            VolumeRenderer(vol, size=args.size, shading=False)
-            .sample_cache(__import__("intuitf.render", fromlist=["Camera"]).Camera())
-            .render(target_tf)
-        )
+        camera = CAMERAS[name]
+        target_img = VolumeRenderer(vol, size=args.size, shading=False).render(target_tf, camera)
         with FakeMLLMServer(
             target=target_img, noise=0.10, position_bias=0.20, seed=args.seed
         ) as srv:
             for method in methods:
                 rows = run_method(
-                    vol, target_img, srv, method, args.population, gens, args.size, args.seed
+                    vol,
+                    camera,
+                    target_img,
+                    srv,
+                    method,
+                    args.population,
+                    gens,
+                    args.size,
+                    args.seed,
                 )
                 results[(name, method)] = rows
                 last = rows[-1]
@@ -142,7 +157,9 @@ def main() -> int:
                 )
             if not (args.quick or args.no_population_study):
                 for pop in (10, 25, 50):
-                    rows = run_method(vol, target_img, srv, "ga", pop, gens, args.size, args.seed)
+                    rows = run_method(
+                        vol, camera, target_img, srv, "ga", pop, gens, args.size, args.seed
+                    )
                     results[(name, f"ga-pop{pop}")] = rows
                     last = rows[-1]
                     print(
