@@ -118,3 +118,32 @@ def test_budget_stop_is_clean_and_saved(vol, tmp_path):
     kinds = [e["type"] for e in rd.read_journal()]
     assert "partial" in kinds and kinds[-1] == "end"
     assert (tmp_path / "r" / "best" / "rank01.png").exists()
+
+
+def test_branch_from_an_earlier_result_starts_with_it(vol):
+    first = Session.create(vol, intent=_intent(), settings=RunSettings(**SETTINGS)).run()
+    tf, _ = first.best[0]
+    s = Session.create(vol, intent=_intent(), settings=RunSettings(**SETTINGS), initial=[tf])
+    s.step()
+    assert tf.to_dict()["gaussians"] in [r["tf"]["gaussians"] for r in s.records[0].candidates]
+
+
+def test_refine_changes_only_the_selected_gaussians(vol):
+    start = Session.create(vol, intent=_intent(), settings=RunSettings(**SETTINGS)).run()
+    tf, _ = start.best[0]
+    s = Session.refine(
+        vol, tf, [1], "make this feature bright green", settings=RunSettings(**SETTINGS)
+    )
+    assert s.plan == [("refine", 4)] and s.intent.kind == "edit" and s.intent.base is not None
+    out = s.run()
+    assert out.completed
+    others = [g for i, g in enumerate(tf.gaussians) if i != 1]
+    for rec in s.records:
+        for c in rec.candidates:
+            gs = c["tf"]["gaussians"]
+            kept = [g for i, g in enumerate(gs) if i != 1]
+            assert [(g["mean"], g["width"], g["height"], g["color"]) for g in kept] == [
+                (g.mean, g.width, g.height, list(g.color)) for g in others
+            ]
+    changed = {tuple(c["tf"]["gaussians"][1]["color"]) for rec in s.records for c in rec.candidates}
+    assert len(changed) > 1

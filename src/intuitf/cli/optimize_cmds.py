@@ -183,6 +183,16 @@ def register(app: typer.Typer) -> None:
         shading: bool = typer.Option(True, "--shading/--no-shading"),
         azimuth: float = typer.Option(None, "--azimuth"),
         elevation: float = typer.Option(None, "--elevation"),
+        refine: Path = typer.Option(
+            None,
+            "--refine",
+            help="Refine this TF JSON: only the --select'ed Gaussians change, as --text says.",
+        ),
+        select: str = typer.Option(
+            None,
+            "--select",
+            help="With --refine: Gaussians to change, 1-based as listed in the TF JSON, e.g. 2,3.",
+        ),
         start_from: list[Path] = typer.Option(
             None, "--start-from", help="TF JSON to include in the first population (repeatable)."
         ),
@@ -218,36 +228,27 @@ def register(app: typer.Typer) -> None:
                 console.print(f"[yellow]note:[/] {note}")
             intent = _build_intent(text, image, sketch, on, about)
             run_dir = output or Path("runs") / f"{vol.name}-{time.strftime('%Y%m%d-%H%M%S')}"
-            session = _new_session(
-                vol,
-                intent,
-                evaluator,
-                base_url,
-                run_dir,
-                dict(
-                    population=population,
-                    generations=generations,
-                    n_gaussians=gaussians,
-                    seed=seed,
-                    explorer=explorer,
-                    protocol=protocol,
-                    image_size=size,
-                    output_size=output_size,
-                    top_k=top,
-                    shading=shading,
-                    camera=_camera_dict(azimuth, elevation),
-                ),
-                budget_usd,
-                budget_calls,
-                start_from or [],
-                overwrite,
-                {
-                    "volume_source": volume,
-                    "volume_args": vol_args,
-                    "evaluator": evaluator,
-                    "base_url": base_url,
-                },
-            )
+            settings_kw = dict(
+                population=population, generations=generations, n_gaussians=gaussians, seed=seed,
+                explorer=explorer, protocol=protocol, image_size=size, output_size=output_size,
+                top_k=top, shading=shading, camera=_camera_dict(azimuth, elevation),
+            )  # fmt: skip
+            record = {
+                "volume_source": volume,
+                "volume_args": vol_args,
+                "evaluator": evaluator,
+                "base_url": base_url,
+            }
+            if refine is not None:
+                session = _refine_session(
+                    vol, refine, select, text, about, evaluator, base_url, run_dir, settings_kw,
+                    budget_usd, budget_calls, overwrite, record,
+                )  # fmt: skip
+            else:
+                session = _new_session(
+                    vol, intent, evaluator, base_url, run_dir, settings_kw, budget_usd,
+                    budget_calls, start_from or [], overwrite, record,
+                )  # fmt: skip
         console.print(
             f"Optimizing [bold]{session.volume.name}[/] with {getattr(session.judge, 'name', 'judge')}: "
             f"population {session.settings.population}, {session.total_generations} generations "
@@ -358,6 +359,42 @@ def _new_session(
         overwrite=overwrite,
         extra_record=record,
     )
+
+
+def _refine_session(
+    vol, tf_path, select, text, about, evaluator, base_url, run_dir, settings_kw,
+    budget_usd, budget_calls, overwrite, record,
+):  # fmt: skip
+    from intuitf.session import RunSettings, Session
+    from intuitf.tf import load_tf
+
+    if not select or not text:
+        raise IntuitfError(
+            "--refine needs --select (which Gaussians to change) and --text (what to change).",
+            'For example: --refine best.tf.json --select 2 --text "make the bone gold"',
+        )
+    tf = load_tf(tf_path)
+    try:
+        picked = [int(x) - 1 for x in select.split(",") if x.strip()]
+    except ValueError as exc:
+        raise IntuitfError(f"--select takes numbers like 1,3; got {select!r}.") from exc
+    if not picked or min(picked) < 0 or max(picked) >= len(tf):
+        raise IntuitfError(
+            f"--select must name Gaussians 1..{len(tf)} of {tf_path}; got {select!r}."
+        )
+    settings = RunSettings(**settings_kw)
+    settings.validate()
+    run_dir = Path(run_dir)
+    if (run_dir / "run.json").exists() and not overwrite:
+        raise SessionError(
+            f"{run_dir} already holds a run.",
+            f"Continue it with --resume {run_dir}, or pick another folder with -o (or --overwrite).",
+        )
+    judge = _make_judge(evaluator, run_dir, base_url, budget_usd, budget_calls)
+    return Session.refine(
+        vol, tf, picked, text, judge=judge, settings=settings, run_dir=run_dir, about=about,
+        overwrite=overwrite, extra_record=record,
+    )  # fmt: skip
 
 
 def _resume_session(run_dir: Path, budget_usd, budget_calls, base_url):

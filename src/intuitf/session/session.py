@@ -185,6 +185,18 @@ class Session:
             value_range=volume.value_range,
             initial=list(initial),
         )
+        if plan[0][0] == "refine":
+            if len(initial) != 1 or not intent.selected:
+                raise SessionError(
+                    "Refinement starts from one transfer function and needs the Gaussians to change.",
+                    "Give exactly one TF to refine and select at least one of its Gaussians.",
+                )
+            try:
+                explorer.set_stage(
+                    "refine", generations=plan[0][1], selected=intent.selected, base=initial[0]
+                )
+            except ValueError as exc:
+                raise SessionError(f"Cannot refine: {exc}") from exc
         rd = RunDirectory(run_dir) if run_dir is not None else None
         if rd is not None:
             rd.create(overwrite=overwrite)
@@ -205,6 +217,55 @@ class Session:
             rd.append_journal({"type": "stage", "generation": 0, "stage": plan[0][0]})
         return cls(
             volume, intent=intent, judge=judge, settings=settings, run_dir=rd, explorer=explorer
+        )
+
+    @classmethod
+    def refine(
+        cls,
+        volume: Volume,
+        tf: GaussianTF,
+        selected: Sequence[int],
+        instruction: str,
+        *,
+        judge: Judge | None = None,
+        settings: RunSettings | None = None,
+        run_dir: str | Path | None = None,
+        about: str | None = None,
+        overwrite: bool = False,
+        extra_record: dict | None = None,
+    ) -> Session:
+        """A run of the refine stage: only the Gaussians ``selected`` (indices into ``tf``) change.
+
+        The judge sees the rendering before the edit and ``instruction``, and prefers
+        candidates where the change happened in the selected features and the rest is kept.
+        """
+        from intuitf.render import Camera, VolumeRenderer
+
+        settings = settings or RunSettings()
+        settings.stages = [("refine", settings.generations)]
+        camera = Camera.from_dict(settings.camera) if settings.camera else Camera()
+        base = VolumeRenderer(
+            volume,
+            size=settings.image_size,
+            shading=settings.shading,
+            background=tuple(settings.background),
+        ).render(tf, camera)
+        intent = Intent(
+            kind="edit",
+            text=instruction,
+            base=base,
+            selected=tuple(int(i) for i in selected),
+            about=about,
+        )
+        return cls.create(
+            volume,
+            intent=intent,
+            judge=judge,
+            settings=settings,
+            run_dir=run_dir,
+            initial=[tf],
+            overwrite=overwrite,
+            extra_record=extra_record,
         )
 
     @classmethod
