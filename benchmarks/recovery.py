@@ -79,6 +79,7 @@ def run_method(vol, camera, target_img, server, method, population, generations,
         cache=VerdictCache(":memory:"),
         max_concurrency=32,
         timeout=30,
+        swap="never",  # the efficient tournament orders and re-checks pairs itself
     )
     settings = RunSettings(
         population=population,

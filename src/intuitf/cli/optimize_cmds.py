@@ -41,12 +41,17 @@ def _build_intent(text, image, sketch, on, about):
     return Intent(kind="none", about=about)
 
 
-def _make_judge(spec: str, run_dir: Path, base_url, budget_usd, budget_calls, spent=None):
+def _make_judge(
+    spec: str, run_dir: Path, base_url, budget_usd, budget_calls, spent=None, protocol="efficient"
+):
     from intuitf.evaluator.budget import Budget
     from intuitf.evaluator.cache import VerdictCache
     from intuitf.evaluator.factory import make_judge
 
-    options = {}
+    # The efficient tournament shows each pair in a seeded random order and re-asks only
+    # surprising verdicts in the other order, so the judge asks once per match; the paper's
+    # protocol asks every pair in both orders.
+    options = {"swap": "never" if protocol == "efficient" else "always"}
     if base_url:
         options["base_url"] = base_url
     budget = None
@@ -347,7 +352,9 @@ def _new_session(
             f"{run_dir} already holds a run.",
             f"Continue it with --resume {run_dir}, or pick another folder with -o (or --overwrite).",
         )
-    judge = _make_judge(evaluator, run_dir, base_url, budget_usd, budget_calls)
+    judge = _make_judge(
+        evaluator, run_dir, base_url, budget_usd, budget_calls, protocol=settings.protocol
+    )
     initial = [load_tf(p) for p in start_from]
     return Session.create(
         vol,
@@ -390,7 +397,9 @@ def _refine_session(
             f"{run_dir} already holds a run.",
             f"Continue it with --resume {run_dir}, or pick another folder with -o (or --overwrite).",
         )
-    judge = _make_judge(evaluator, run_dir, base_url, budget_usd, budget_calls)
+    judge = _make_judge(
+        evaluator, run_dir, base_url, budget_usd, budget_calls, protocol=settings.protocol
+    )
     return Session.refine(
         vol, tf, picked, text, judge=judge, settings=settings, run_dir=run_dir, about=about,
         overwrite=overwrite, extra_record=record,
@@ -415,6 +424,7 @@ def _resume_session(run_dir: Path, budget_usd, budget_calls, base_url):
         budget_usd,
         budget_calls,
         spent,
+        protocol=record.get("settings", {}).get("protocol", "efficient"),
     )
     session = Session.resume(rd.root, vol, judge)
     if session.done:
