@@ -120,7 +120,8 @@ def main() -> int:
     ap.add_argument("--generations", type=int, default=12)
     ap.add_argument("--population", type=int, default=32)
     ap.add_argument("--size", type=int, default=128)
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=0, help="first seed")
+    ap.add_argument("--seeds", type=int, default=3, help="runs per method, averaged")
     ap.add_argument("--methods", default="ga,paper-ga,cmaes,random")
     ap.add_argument("--no-population-study", action="store_true")
     ap.add_argument("--plot", default=str(Path(__file__).with_name("out") / "recovery.png"))
@@ -129,51 +130,60 @@ def main() -> int:
     gens = 6 if args.quick else args.generations
     methods = args.methods.split(",")
     results: dict[tuple[str, str], list[dict]] = {}
+    seeds = list(range(args.seed, args.seed + args.seeds))
+
+    def averaged(vol, camera, target_img, method, population):
+        """Per-generation means over the seeds (each seed: its own server noise and search)."""
+        runs = []
+        for seed in seeds:
+            with FakeMLLMServer(
+                target=target_img, noise=0.10, position_bias=0.20, seed=seed
+            ) as srv:
+                runs.append(
+                    run_method(
+                        vol, camera, target_img, srv, method, population, gens, args.size, seed
+                    )
+                )
+        rows = []
+        for g in range(gens):
+            cell = {k: float(np.mean([r[g][k] for r in runs])) for k in runs[0][g]}
+            cell["ssim_min"] = float(min(r[g]["ssim"] for r in runs))
+            cell["ssim_max"] = float(max(r[g]["ssim"] for r in runs))
+            rows.append(cell)
+        return rows
+
+    def report(name, label, rows):
+        last = rows[-1]
+        print(
+            f"{name.split('_')[0]:8s} {label:11s} final SSIM {last['ssim']:.3f} "
+            f"({last['ssim_min']:.3f}–{last['ssim_max']:.3f})  ΔE {last['delta_e']:.1f}  "
+            f"calls {last['calls']:.0f}  {last['seconds']:.0f}s per run",
+            flush=True,
+        )
+
     for name in volumes:
         vol = load_volume(DATA / name)
-        target_tf = TARGETS[name]
         camera = CAMERAS[name]
-        target_img = VolumeRenderer(vol, size=args.size, shading=False).render(target_tf, camera)
-        with FakeMLLMServer(
-            target=target_img, noise=0.10, position_bias=0.20, seed=args.seed
-        ) as srv:
-            for method in methods:
-                rows = run_method(
-                    vol,
-                    camera,
-                    target_img,
-                    srv,
-                    method,
-                    args.population,
-                    gens,
-                    args.size,
-                    args.seed,
-                )
-                results[(name, method)] = rows
-                last = rows[-1]
-                print(
-                    f"{name.split('_')[0]:8s} {method:9s} final SSIM {last['ssim']:.3f}  ΔE {last['delta_e']:.1f}  "
-                    f"calls {last['calls']}  {last['seconds']:.0f}s",
-                    flush=True,
-                )
-            if not (args.quick or args.no_population_study):
-                for pop in (10, 25, 50):
-                    rows = run_method(
-                        vol, camera, target_img, srv, "ga", pop, gens, args.size, args.seed
-                    )
-                    results[(name, f"ga-pop{pop}")] = rows
-                    last = rows[-1]
-                    print(
-                        f"{name.split('_')[0]:8s} ga pop {pop:<3d} final SSIM {last['ssim']:.3f}  ΔE {last['delta_e']:.1f}  "
-                        f"calls {last['calls']}  {last['seconds']:.0f}s",
-                        flush=True,
-                    )
+        target_img = VolumeRenderer(vol, size=args.size, shading=False).render(
+            TARGETS[name], camera
+        )
+        for method in methods:
+            rows = averaged(vol, camera, target_img, method, args.population)
+            results[(name, method)] = rows
+            report(name, method, rows)
+        if not (args.quick or args.no_population_study):
+            for pop in (10, 25, 50):
+                rows = averaged(vol, camera, target_img, "ga", pop)
+                results[(name, f"ga-pop{pop}")] = rows
+                report(name, f"ga pop {pop}", rows)
 
-    print("\nPer generation: SSIM of the best individual / cumulative paid calls")
+    print(
+        f"\nPer generation, mean of {len(seeds)} seeds: SSIM of the best individual / cumulative paid calls"
+    )
     header = "volume   method      " + " ".join(f"g{g:02d}      " for g in range(gens))
     print(header)
     for (name, method), rows in results.items():
-        cells = " ".join(f"{r['ssim']:.3f}/{r['calls']:<4d}" for r in rows)
+        cells = " ".join(f"{r['ssim']:.3f}/{r['calls']:<4.0f}" for r in rows)
         print(f"{name.split('_')[0]:8s} {method:11s} {cells}")
     print("\nPer generation: mean CIEDE2000 colour error of the best individual")
     for (name, method), rows in results.items():

@@ -203,3 +203,22 @@ def test_features_are_cached_by_content():
     assert (j.cache_hits, j.cache_misses) == (2, 4)
     cmp(j, c, a, QUALITY)
     assert (j.cache_hits, j.cache_misses) == (4, 4) and len(j._cache) == 2
+
+
+def test_text_modifiers_apply_to_their_own_colour():
+    """'opaque ivory bone, faint red skin': a faint red layer over solid ivory beats solid red."""
+    from intuitf.evaluator.aspects import aspects_for
+    from intuitf.evaluator.metric import MetricJudge
+    from intuitf.evaluator.types import Choice, Intent
+
+    yy, xx = np.mgrid[0:96, 0:96]
+    body = (xx - 48) ** 2 + (yy - 48) ** 2 < 40**2
+    bone = (xx - 48) ** 2 + (yy - 48) ** 2 < 18**2
+    wanted = np.zeros((96, 96, 3), np.uint8)
+    wanted[body] = (90, 20, 20)  # faint red: a translucent red layer over black
+    wanted[bone] = (245, 240, 220)  # opaque ivory
+    solid_red = np.zeros((96, 96, 3), np.uint8)
+    solid_red[body] = (220, 40, 40)  # red skin hiding the bone
+    intent = Intent(kind="text", text="opaque ivory bone, faint red skin")
+    verdict = asyncio.run(MetricJudge().compare(wanted, solid_red, aspects_for("text"), intent))
+    assert verdict.overall is Choice.FIRST

@@ -343,16 +343,23 @@ class MetricJudge:
         if not text:
             return None
         parts = []
-        names = named_colours(text)
-        if names:
-            parts.append(_colour_presence(f, names, f.fg))
-        if _SEMI_RE.search(text):
-            parts.append(1.0 - min(1.0, abs(f.opacity - _SEMI_TARGET) / _SEMI_TARGET))
-        elif _OPAQUE_RE.search(text.replace("semi", "")):
-            parts.append(min(1.0, f.opacity / 100.0))
-        elif _TRANSPARENT_RE.search(text):
-            # Faint but present: no foreground at all is not "transparent", it is empty.
-            parts.append(0.0 if f.coverage < 0.005 else 1.0 - min(1.0, f.opacity / 100.0))
+        clauses = _colour_clauses(text)
+        if any(mod for _, mod in clauses):
+            # "opaque ivory bone, faint red skin": each colour is checked with its own
+            # modifier, so one opaque layer painting everything cannot satisfy both.
+            for name, mod in clauses:
+                parts.append(_clause_presence(f, name, mod))
+        else:
+            names = [name for name, _ in clauses]
+            if names:
+                parts.append(_colour_presence(f, names, f.fg))
+            if _SEMI_RE.search(text):
+                parts.append(1.0 - min(1.0, abs(f.opacity - _SEMI_TARGET) / _SEMI_TARGET))
+            elif _OPAQUE_RE.search(text.replace("semi", "")):
+                parts.append(min(1.0, f.opacity / 100.0))
+            elif _TRANSPARENT_RE.search(text):
+                # Faint but present: no foreground at all is not "transparent", it is empty.
+                parts.append(0.0 if f.coverage < 0.005 else 1.0 - min(1.0, f.opacity / 100.0))
         if _COLOURFUL_RE.search(text):
             parts.append(min(1.0, f.variety / 6.0))
         if _CONTRAST_RE.search(text):
@@ -402,6 +409,56 @@ class MetricJudge:
     def _base_lab(self, intent: Intent, shape: tuple[int, int]) -> np.ndarray:
         base = self.features(intent.base).lab  # type: ignore[arg-type]
         return _resize_like(base, shape, order=1)
+
+
+def _colour_clauses(text: str) -> list[tuple[str, str | None]]:
+    """(colour, modifier) per clause of ``text``; modifier "opaque", "semi", "faint" or None.
+
+    Clauses are split at commas, semicolons and "and"/"with"; a modifier applies to the
+    colours of its own clause only.
+    """
+    out: list[tuple[str, str | None]] = []
+    for clause in re.split(r"[,;]|\band\b|\bwith\b", text):
+        names = named_colours(clause)
+        if not names:
+            continue
+        if _SEMI_RE.search(clause):
+            mod: str | None = "semi"
+        elif _OPAQUE_RE.search(clause.replace("semi", "")):
+            mod = "opaque"
+        elif _TRANSPARENT_RE.search(clause):
+            mod = "faint"
+        else:
+            mod = None
+        out.extend((n, mod) for n in names if n not in [c for c, _ in out])
+    return out
+
+
+def _clause_presence(f: _Features, name: str, mod: str | None) -> float:
+    """How well the foreground shows colour ``name`` with the look ``mod`` asks for.
+
+    Opaque (or unqualified): pixels within ΔE 25 of the colour. Faint or semi-opaque: a
+    translucent layer over the background keeps the colour's hue but loses chroma and
+    lightness, so pixels whose hue is within 30° of the colour's, with some chroma, count;
+    pixels at full strength count less for "faint" (they look solid).
+    """
+    pix = f.lab[f.fg]
+    if pix.shape[0] == 0:
+        return 0.0
+    target = _named_lab([name])[0]
+    if mod in (None, "opaque") or np.hypot(target[1], target[2]) < 12:
+        # Achromatic colours (white, ivory, grey) have no hue to follow: match them directly.
+        near = np.linalg.norm(pix - target, axis=1) < _NAMED_DELTA_E
+        return float(min(1.0, near.mean() / _NAMED_SATURATION))
+    hue = np.arctan2(pix[:, 2], pix[:, 1])
+    chroma = np.hypot(pix[:, 1], pix[:, 2])
+    t_hue = np.arctan2(target[2], target[1])
+    dh = np.abs(np.angle(np.exp(1j * (hue - t_hue))))
+    tinted = (dh < np.radians(30)) & (chroma > 8)
+    if mod == "faint":
+        solid = np.linalg.norm(pix - target, axis=1) < _NAMED_DELTA_E * 0.6
+        tinted &= ~solid
+    return float(min(1.0, tinted.mean() / (_NAMED_SATURATION * 2)))
 
 
 def _colour_presence(f: _Features, names: Sequence[str], region: np.ndarray) -> float:
