@@ -61,11 +61,27 @@ def test_height_steps_are_multiplicative():
     rng = np.random.default_rng(2)
     g = Gaussian(0.5, 0.02, 0.01, (1.0, 0.5, 0.5))
     tf = GaussianTF((g,))
-    p = replace(INITIALIZE.mutation_params(0.5), rate=1.0, mean_rate=0.0, color_rate=0.0)
+    p = replace(
+        INITIALIZE.mutation_params(0.5), rate=1.0, mean_rate=0.0, color_rate=0.0, toggle_prob=0.0
+    )
     h = np.array([mutate(tf, rng, p, B).gaussians[0].height for _ in range(2000)])
     ratio = np.log(h / 0.01)
     assert abs(np.median(ratio)) < 0.05  # unbiased in log space
     assert (h > 0.001).mean() > 0.99 and np.std(ratio) == pytest.approx(p.height_step, rel=0.1)
+
+
+def test_toggle_hides_a_visible_feature_and_reveals_a_hidden_one():
+    rng = np.random.default_rng(4)
+    shown = Gaussian(0.3, 0.02, 0.2, (1.0, 0.5, 0.5))
+    hidden = Gaussian(0.7, 0.02, B.height_floor, (0.5, 0.5, 1.0))
+    tf = GaussianTF((shown, hidden))
+    p = replace(
+        INITIALIZE.mutation_params(0.0), rate=0.0, mean_rate=0.0, color_rate=0.0, toggle_prob=1.0
+    )
+    for _ in range(50):
+        out = mutate(tf, rng, p, B)
+        assert out.gaussians[0].height == B.height_floor
+        assert B.height_init[0] <= out.gaussians[1].height <= B.height_init[1]
 
 
 def test_hue_step_wraps_around():

@@ -50,6 +50,7 @@ class MutationParams:
     swap_prob: float = 0.3  # per individual: swap two Gaussians' colours instead of HSL steps
     channel_prob: float = 0.05  # per Gaussian: permute its own RGB channels instead
     additive: bool = False
+    toggle_prob: float = 0.0  # per Gaussian: switch the feature off, or back on if it is off
 
     def forced(self) -> MutationParams:
         """Every attribute changes: used to push a near-duplicate away from its twin."""
@@ -117,6 +118,15 @@ def mutate(
             else:
                 height = max(height, b.height_floor) * math.exp(rng.normal(0.0, p.height_step))
             height = _clip(height, b.height)
+        if p.toggle_prob and rng.random() < p.toggle_prob:
+            # Which materials are visible at all is the biggest decision in a TF; small
+            # multiplicative steps take many generations to hide or reveal one, a toggle
+            # does it at once (hidden: just above the floor; shown: a fresh initial height).
+            lo, hi = b.height_init
+            if height > lo:
+                height = b.height_floor
+            else:
+                height = float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
         gs[i] = replace(g, mean=mean, width=width, height=height)
     if len(free) >= 2 and rng.random() < p.swap_prob:
         i, j = (int(k) for k in rng.choice(free, size=2, replace=False))

@@ -59,6 +59,7 @@ class StagePreset:
     sl_step: Decay = Decay(0.2, 0.05)
     swap_prob: float = 0.2
     channel_prob: float = 0.05
+    toggle_prob: float = 0.0
     additive_steps: bool = False
     crossover_rate: Decay = Decay(0.9, 0.6)
     attr_prob: float = 0.4
@@ -93,6 +94,7 @@ class StagePreset:
             sl_step=self.sl_step.at(progress),
             swap_prob=self.swap_prob,
             channel_prob=self.channel_prob,
+            toggle_prob=self.toggle_prob,
             additive=self.additive_steps,
         )
 
@@ -137,7 +139,7 @@ class StagePreset:
 
 
 #: Initialization: quality aspects only, broad search with high rates that decay.
-INITIALIZE = StagePreset(name="initialize", aspects="quality")
+INITIALIZE = StagePreset(name="initialize", aspects="quality", toggle_prob=0.06)
 
 #: Customization: intent aspects; rates raised again (the schedule restarts), but positions
 #: barely move so the structures found in initialization are kept. Colours are not reset.
@@ -153,6 +155,7 @@ CUSTOMIZE = StagePreset(
     hue_step=Decay(0.1, 0.02),
     sl_step=Decay(0.25, 0.05),
     swap_prob=0.25,
+    toggle_prob=0.04,
 )
 
 #: Refinement: only the selected Gaussians evolve (the rest are frozen); edit aspects.
