@@ -117,6 +117,14 @@ class SampleCache:
     def _composite(self, lut: np.ndarray) -> np.ndarray:
         occupied = np.concatenate(([0], np.cumsum(lut[:, 3] > 0))).astype(np.int64)
         out = np.empty((self.width * self.height, 4), dtype=np.float32)
+        if not self.renderer.shading:
+            premultiplied = lut.copy()
+            premultiplied[:, :3] *= premultiplied[:, 3:4]
+            kernels.composite_unshaded(
+                self.offsets, self.samples, self.segmin, self.segmax, occupied, premultiplied,
+                EARLY_STOP, out,
+            )  # fmt: skip
+            return out.reshape(self.height, self.width, 4)
         kernels.composite(
             self.offsets,
             self.samples,

@@ -384,6 +384,44 @@ def segment_minmax(samples, segmin, segmax):
 
 
 @njit(parallel=True, cache=True, fastmath=True)
+def composite_unshaded(offsets, samples, segmin, segmax, occupied, plut, t_stop, out):
+    """:func:`composite` without shading, from a premultiplied LUT (r·a, g·a, b·a, a).
+
+    Same result; the inner loop has no branch on empty samples (a zero-alpha entry adds
+    nothing), which is what makes it faster on the per-candidate path.
+    """
+    for p in prange(offsets.shape[0] - 1):
+        s0 = offsets[p]
+        s1 = offsets[p + 1]
+        r = 0.0
+        g = 0.0
+        b = 0.0
+        tr = 1.0
+        k = s0
+        while k < s1:
+            seg = k >> SEG_SHIFT
+            e = min((seg + 1) << SEG_SHIFT, s1)
+            if occupied[np.int64(segmax[seg]) + 1] == occupied[np.int64(segmin[seg])]:
+                k = e
+                continue
+            for kk in range(k, e):
+                q = samples[kk]
+                r += tr * plut[q, 0]
+                g += tr * plut[q, 1]
+                b += tr * plut[q, 2]
+                tr *= 1.0 - plut[q, 3]
+                if tr < t_stop:
+                    break
+            if tr < t_stop:
+                break
+            k = e
+        out[p, 0] = r
+        out[p, 1] = g
+        out[p, 2] = b
+        out[p, 3] = 1.0 - tr
+
+
+@njit(parallel=True, cache=True, fastmath=True)
 def composite(
     offsets, samples, diffuse, specular, shading, segmin, segmax, occupied, lut, shade_params,
     t_stop, out,
