@@ -553,7 +553,27 @@ class Session:
     def _run_async(self, coro):
         if self._loop is None or self._loop.is_closed():
             self._loop = asyncio.new_event_loop()
-        return self._loop.run_until_complete(coro)
+        try:
+            return self._loop.run_until_complete(coro)
+        except BaseException:
+            # Ctrl-C (or any abort) leaves the round's other requests pending: cancel them
+            # and let them unwind, so nothing is left half-started (unanswered requests
+            # were not paid for; answered ones are already in the verdict cache).
+            self._cancel_pending()
+            raise
+
+    def _cancel_pending(self) -> None:
+        loop = self._loop
+        if loop is None or loop.is_closed():
+            return
+        pending = [t for t in asyncio.all_tasks(loop) if not t.done()]
+        for t in pending:
+            t.cancel()
+        if pending:
+            try:
+                loop.run_until_complete(asyncio.gather(*pending, return_exceptions=True))
+            except BaseException:  # a second Ctrl-C while unwinding: stop unwinding
+                pass
 
     def close(self) -> None:
         """Release the session's event loop and the judge's connections."""
