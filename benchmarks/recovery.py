@@ -2,7 +2,8 @@
 
 For each volume a target TF is hidden; its rendering is the only thing the judge knows. The fake
 OpenAI-compatible server (``intuitf.testing.fake_mllm``) prefers, in every pair, the rendering
-closer to the target, with 10 % noise and 20 % position bias, and the real ``MLLMJudge`` asks it
+closer to the target (by SSIM, or with ``--oracle mad`` by the server's own mean absolute
+difference at 64x64), with 10 % noise and 20 % position bias, and the real ``MLLMJudge`` asks it
 over loopback HTTP. Every method runs through the same Session, tournament protocol and judge,
 so they spend (nearly) the same number of judge calls; the table shows each method's best
 individual per generation: SSIM and mean colour error (CIELAB ΔE) to the target, calls, time.
@@ -20,6 +21,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
 from skimage.color import deltaE_ciede2000, rgb2lab
 from skimage.metrics import structural_similarity
 
@@ -72,6 +74,17 @@ def similarity(image: np.ndarray, target: np.ndarray) -> tuple[float, float]:
     return float(ssim), float(de.mean())
 
 
+def ssim_oracle(target: np.ndarray):
+    """The fake judge's notion of closeness: SSIM to the target image (higher is closer)."""
+
+    def score(image: np.ndarray) -> float:
+        if image.shape != target.shape:
+            image = np.asarray(Image.fromarray(image).resize(target.shape[1::-1]))
+        return float(structural_similarity(image, target, channel_axis=2, data_range=255))
+
+    return score
+
+
 def run_method(vol, camera, target_img, server, method, population, generations, size, seed):
     judge = MLLMJudge(
         "default",
@@ -122,6 +135,13 @@ def main() -> int:
     ap.add_argument("--size", type=int, default=128)
     ap.add_argument("--seed", type=int, default=0, help="first seed")
     ap.add_argument("--seeds", type=int, default=3, help="runs per method, averaged")
+    ap.add_argument(
+        "--oracle",
+        choices=("ssim", "mad"),
+        default="ssim",
+        help="what the fake judge calls closer: SSIM to the target at full size (the measure "
+        "reported), or the server's built-in mean absolute difference at 64x64",
+    )
     ap.add_argument("--methods", default="ga,paper-ga,cmaes,random")
     ap.add_argument("--no-population-study", action="store_true")
     ap.add_argument("--plot", default=str(Path(__file__).with_name("out") / "recovery.png"))
@@ -136,9 +156,12 @@ def main() -> int:
         """Per-generation means over the seeds (each seed: its own server noise and search)."""
         runs = []
         for seed in seeds:
-            with FakeMLLMServer(
-                target=target_img, noise=0.10, position_bias=0.20, seed=seed
-            ) as srv:
+            oracle = (
+                {"score": ssim_oracle(target_img)}
+                if args.oracle == "ssim"
+                else {"target": target_img}
+            )
+            with FakeMLLMServer(**oracle, noise=0.10, position_bias=0.20, seed=seed) as srv:
                 runs.append(
                     run_method(
                         vol, camera, target_img, srv, method, population, gens, args.size, seed
