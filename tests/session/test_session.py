@@ -147,3 +147,31 @@ def test_refine_changes_only_the_selected_gaussians(vol):
             ]
     changed = {tuple(c["tf"]["gaussians"][1]["color"]) for rec in s.records for c in rec.candidates}
     assert len(changed) > 1
+
+
+def test_full_disk_ends_cleanly_and_the_run_resumes(vol, tmp_path, monkeypatch):
+    import errno
+    import os
+
+    ref = Session.create(vol, intent=_intent(), settings=RunSettings(**SETTINGS)).run()
+    real_replace = os.replace
+    checkpoints = []
+
+    def replace_until_disk_fills(src, dst):
+        if str(dst).endswith("checkpoint.json"):
+            if len(checkpoints) >= 2:
+                raise OSError(errno.ENOSPC, "No space left on device")
+            checkpoints.append(dst)
+        return real_replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", replace_until_disk_fills)
+    run = tmp_path / "run"
+    out = Session.create(vol, intent=_intent(), settings=RunSettings(**SETTINGS), run_dir=run).run()
+    assert out.reason == "storage" and "disk is full" in out.message
+    monkeypatch.setattr(os, "replace", real_replace)
+    rd = RunDirectory(run)
+    assert rd.read_checkpoint()["generation"] == 2  # the last checkpoint that fit is intact
+    resumed = Session.resume(run, vol, Session.create(vol, settings=RunSettings(**SETTINGS)).judge)
+    out2 = resumed.run()
+    assert out2.completed
+    assert _best_tfs(out2) == _best_tfs(ref)

@@ -68,7 +68,7 @@ class GenerationRecord:
 class RunOutcome:
     """How a run ended and where its results are."""
 
-    reason: str  # "completed" | "budget" | "judge" | "interrupted" | "disk" | "error"
+    reason: str  # "completed" | "budget" | "judge" | "interrupted" | "storage"
     message: str
     generations_done: int
     cost: Cost
@@ -418,8 +418,8 @@ class Session:
                 )
             raise
 
-        fitness = None
-        self.explorer.tell(result.ranking, fitness)
+        # Fitness comes from the ranking and the stage's pressure schedule (Explorer default).
+        self.explorer.tell(result.ranking)
         seconds = time.perf_counter() - t0
         self.cost += result.cost
         self.cost.seconds += seconds
@@ -500,8 +500,8 @@ class Session:
             reason, message = "judge", str(exc)
         except KeyboardInterrupt:
             reason, message = "interrupted", "Interrupted by the user."
-        except SessionError as exc:
-            reason, message = "disk", str(exc)
+        except SessionError as exc:  # the run folder cannot be written (full disk, ...)
+            reason, message = "storage", str(exc)
         if self.run_dir is not None:
             try:
                 self._journal(
@@ -516,7 +516,7 @@ class Session:
                 if write_outputs and self.last_ranking:
                     self.write_outputs()
             except IntuitfError as exc:  # e.g. the disk filled up while saving outputs
-                reason, message = "disk", f"{message} Saving outputs failed: {exc}"
+                reason, message = "storage", f"{message} Saving outputs failed: {exc}"
         if progress:
             progress(self._event("end", message=message))
         return RunOutcome(
