@@ -181,3 +181,19 @@ def test_lost_model_server_ends_cleanly(tmp_path):
     assert "Traceback" not in proc.stderr
     assert "--resume" in proc.stdout
     assert (run / "run.json").exists()
+
+
+def test_spent_budget_stops_cleanly_and_a_larger_one_resumes(tmp_path):
+    with FakeMLLMServer(target=_target()) as srv:
+        run = tmp_path / "run"
+        spec = ["--evaluator", srv.base_url]
+        first = _intuitf("optimize", "phantom", *COMMON, *spec, "--budget-calls", "30",
+                         "-o", str(run), check=False)  # fmt: skip
+        assert first.returncode == 3, (first.stdout, first.stderr)
+        assert "budget" in first.stdout.lower() and "--resume" in first.stdout
+        assert "Traceback" not in first.stderr
+        paid_before = srv.stats.requests
+        assert paid_before <= 30
+        _intuitf("optimize", "--resume", str(run), "--budget-calls", "1000")
+        assert _generations(run)[-1] == 3
+        assert (run / "best" / "rank01.tf.json").exists()
