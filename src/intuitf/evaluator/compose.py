@@ -13,7 +13,10 @@ server in :mod:`intuitf.testing.fake_mllm`, which finds the candidates by these 
 from __future__ import annotations
 
 import base64
+import hashlib
 import io
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Literal
 
@@ -76,10 +79,37 @@ def encode_image(arr: np.ndarray, fmt: ImageFormat = "png", quality: int = 90) -
     return "image/png", buf.getvalue()
 
 
+_URI_CACHE: OrderedDict[tuple, str] = OrderedDict()
+_URI_CACHE_SIZE = 128  # a population of renderings plus the intent images
+_URI_LOCK = threading.Lock()
+
+
 def data_uri(arr: np.ndarray, fmt: ImageFormat = "png", quality: int = 90) -> str:
-    """An image as a ``data:`` URI for an ``image_url`` content part."""
-    mime, data = encode_image(arr, fmt, quality)
-    return f"data:{mime};base64,{base64.b64encode(data).decode('ascii')}"
+    """An image as a ``data:`` URI for an ``image_url`` content part.
+
+    A tournament shows each rendering in several matches; encoding is the costly part, so
+    the last few hundred encodings are remembered by the content of the image.
+    """
+    a = np.ascontiguousarray(arr)
+    key = (
+        hashlib.blake2b(a.tobytes(), digest_size=16).digest(),
+        a.shape,
+        str(a.dtype),
+        fmt,
+        quality,
+    )
+    with _URI_LOCK:
+        uri = _URI_CACHE.get(key)
+        if uri is not None:
+            _URI_CACHE.move_to_end(key)
+            return uri
+    mime, data = encode_image(a, fmt, quality)
+    uri = f"data:{mime};base64,{base64.b64encode(data).decode('ascii')}"
+    with _URI_LOCK:
+        _URI_CACHE[key] = uri
+        while len(_URI_CACHE) > _URI_CACHE_SIZE:
+            _URI_CACHE.popitem(last=False)
+    return uri
 
 
 def decode_data_uri(uri: str) -> np.ndarray:
