@@ -10,6 +10,7 @@ import sys
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 
 from intuitf.errors import IntuitfError
 
@@ -44,9 +45,10 @@ def main(argv: list[str] | None = None) -> None:
         if isinstance(rc, int) and rc != 0:
             sys.exit(rc)
     except IntuitfError as exc:
-        err_console.print(f"[bold red]error:[/] {exc.message}", highlight=False)
+        # escape(): messages quote paths and config snippets such as "[api_keys]".
+        err_console.print(f"[bold red]error:[/] {escape(exc.message)}", highlight=False)
         if exc.hint:
-            err_console.print(f"[yellow]what to do:[/] {exc.hint}", highlight=False)
+            err_console.print(f"[yellow]what to do:[/] {escape(exc.hint)}", highlight=False)
         sys.exit(2)
     except KeyboardInterrupt:
         err_console.print("[yellow]Interrupted.[/] Everything finished so far was kept.")

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import shutil
 import time
 from pathlib import Path
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
@@ -62,10 +64,17 @@ def _make_judge(
             budget.calls, budget.usd = spent.calls, spent.usd
     if spec == "metric":
         return make_judge(spec)
+    created = not run_dir.exists()
     run_dir.mkdir(parents=True, exist_ok=True)
-    return make_judge(
-        spec, cache=VerdictCache(run_dir / "verdicts.sqlite"), budget=budget, **options
-    )
+    try:
+        return make_judge(
+            spec, cache=VerdictCache(run_dir / "verdicts.sqlite"), budget=budget, **options
+        )
+    except IntuitfError:
+        # A bad spec or a missing API key must not leave an empty run folder behind.
+        if created:
+            shutil.rmtree(run_dir, ignore_errors=True)
+        raise
 
 
 class _ProgressView:
@@ -133,7 +142,7 @@ def _print_summary(outcome, session, started: float) -> None:
     )
     if outcome.run_dir is not None:
         color = "green" if outcome.completed else "yellow"
-        console.print(f"[{color}]{outcome.message}[/]")
+        console.print(f"[{color}]{escape(outcome.message)}[/]")
         console.print(
             f"Results: [bold]{outcome.run_dir}[/]  (report: {outcome.run_dir / 'report.html'})"
         )
@@ -230,7 +239,7 @@ def register(app: typer.Typer) -> None:
             )
             vol = open_volume(volume, **vol_args)
             for note in vol.notes:
-                console.print(f"[yellow]note:[/] {note}")
+                console.print(f"[yellow]note:[/] {escape(note)}")
             intent = _build_intent(text, image, sketch, on, about)
             run_dir = output or Path("runs") / f"{vol.name}-{time.strftime('%Y%m%d-%H%M%S')}"
             settings_kw = dict(
@@ -341,19 +350,11 @@ def _new_session(
     overwrite,
     record,
 ):
-    from intuitf.session import RunSettings, Session
+    from intuitf.session import Session
     from intuitf.tf import load_tf
 
-    settings = RunSettings(**settings_kw)
-    settings.validate()
-    run_dir = Path(run_dir)
-    if (run_dir / "run.json").exists() and not overwrite:
-        raise SessionError(
-            f"{run_dir} already holds a run.",
-            f"Continue it with --resume {run_dir}, or pick another folder with -o (or --overwrite).",
-        )
-    judge = _make_judge(
-        evaluator, run_dir, base_url, budget_usd, budget_calls, protocol=settings.protocol
+    settings, run_dir, judge = _prepare_run(
+        settings_kw, run_dir, overwrite, evaluator, base_url, budget_usd, budget_calls
     )
     initial = [load_tf(p) for p in start_from]
     return Session.create(
@@ -368,11 +369,29 @@ def _new_session(
     )
 
 
+def _prepare_run(settings_kw, run_dir, overwrite, evaluator, base_url, budget_usd, budget_calls):
+    """Validated settings, a run folder that holds no other run, and the judge for it."""
+    from intuitf.session import RunSettings
+
+    settings = RunSettings(**settings_kw)
+    settings.validate()
+    run_dir = Path(run_dir)
+    if (run_dir / "run.json").exists() and not overwrite:
+        raise SessionError(
+            f"{run_dir} already holds a run.",
+            f"Continue it with --resume {run_dir}, or pick another folder with -o (or --overwrite).",
+        )
+    judge = _make_judge(
+        evaluator, run_dir, base_url, budget_usd, budget_calls, protocol=settings.protocol
+    )
+    return settings, run_dir, judge
+
+
 def _refine_session(
     vol, tf_path, select, text, about, evaluator, base_url, run_dir, settings_kw,
     budget_usd, budget_calls, overwrite, record,
 ):  # fmt: skip
-    from intuitf.session import RunSettings, Session
+    from intuitf.session import Session
     from intuitf.tf import load_tf
 
     if not select or not text:
@@ -389,16 +408,8 @@ def _refine_session(
         raise IntuitfError(
             f"--select must name Gaussians 1..{len(tf)} of {tf_path}; got {select!r}."
         )
-    settings = RunSettings(**settings_kw)
-    settings.validate()
-    run_dir = Path(run_dir)
-    if (run_dir / "run.json").exists() and not overwrite:
-        raise SessionError(
-            f"{run_dir} already holds a run.",
-            f"Continue it with --resume {run_dir}, or pick another folder with -o (or --overwrite).",
-        )
-    judge = _make_judge(
-        evaluator, run_dir, base_url, budget_usd, budget_calls, protocol=settings.protocol
+    settings, run_dir, judge = _prepare_run(
+        settings_kw, run_dir, overwrite, evaluator, base_url, budget_usd, budget_calls
     )
     return Session.refine(
         vol, tf, picked, text, judge=judge, settings=settings, run_dir=run_dir, about=about,
