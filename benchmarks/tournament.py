@@ -31,11 +31,20 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import math
+import socket
+import subprocess
+import sys
+import tempfile
 import time
+import types
 from dataclasses import dataclass, field
+from pathlib import Path
 
+import httpx
 import numpy as np
+from PIL import Image
 from scipy.stats import kendalltau
 
 from intuitf.evaluator.aspects import aspects_for
@@ -176,12 +185,56 @@ def metric_timing() -> tuple[float, float]:
     return cold, warm
 
 
+@contextlib.contextmanager
+def in_process_server(target: np.ndarray, latency: float):
+    with FakeMLLMServer(
+        target=target, latency=latency, noise=0.10, position_bias=0.20, seed=7
+    ) as server:
+        yield server
+
+
+@contextlib.contextmanager
+def external_server(target: np.ndarray, latency: float):
+    """``python -m intuitf.testing.fake_mllm`` in a subprocess on a free loopback port."""
+    with tempfile.TemporaryDirectory() as tmp:
+        target_path = Path(tmp) / "target.png"
+        Image.fromarray(target).save(target_path)
+        with socket.socket() as sock:
+            sock.bind(("127.0.0.1", 0))
+            port = sock.getsockname()[1]
+        cmd = [sys.executable, "-m", "intuitf.testing.fake_mllm", "--port", str(port),
+               "--target", str(target_path), "--latency", str(latency), "--noise", "0.1",
+               "--position-bias", "0.2", "--seed", "7"]  # fmt: skip
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        base_url = f"http://127.0.0.1:{port}/v1"
+        try:
+            deadline = time.time() + 60
+            while True:
+                try:
+                    httpx.get(f"{base_url}/models", timeout=1.0).raise_for_status()
+                    break
+                except httpx.HTTPError:
+                    if time.time() > deadline or proc.poll() is not None:
+                        raise RuntimeError("the fake model server did not start") from None
+                    time.sleep(0.2)
+            yield types.SimpleNamespace(base_url=base_url)
+        finally:
+            proc.terminate()
+            proc.wait(timeout=10)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="latency 0.5 s only")
     ap.add_argument("--generations", type=int, default=4)
     ap.add_argument("--repeats", type=int, default=None, help="seeds per setting")
     ap.add_argument("--variants", action="store_true", help="also run paper+auto")
+    ap.add_argument(
+        "--server-process",
+        action="store_true",
+        help="run the fake model server in its own process (as a real server would be), so "
+        "its image decoding does not share this process's interpreter",
+    )
     args = ap.parse_args()
     latencies = [0.5] if args.quick else [2.0, 0.5]
     protocols = ["authors", "efficient"] + (["paper+auto"] if args.variants else [])
@@ -199,8 +252,8 @@ def main() -> None:
     rows = []
     for latency in latencies:
         repeats = args.repeats or (2 if latency < 1 else 1)
-        with FakeMLLMServer(target=target, latency=latency, noise=0.10, position_bias=0.20,
-                            seed=7) as server:  # fmt: skip
+        serve = external_server if args.server_process else in_process_server
+        with serve(target, latency) as server:
             for proto in protocols:
                 tallies = [
                     asyncio.run(
