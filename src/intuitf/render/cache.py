@@ -130,7 +130,6 @@ class SampleCache:
             self.samples,
             self.diffuse,
             self.specular,
-            self.renderer.shading,
             self.segmin,
             self.segmax,
             occupied,

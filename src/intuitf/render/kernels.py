@@ -423,10 +423,12 @@ def composite_unshaded(offsets, samples, segmin, segmax, occupied, plut, t_stop,
 
 @njit(parallel=True, cache=True, fastmath=True)
 def composite(
-    offsets, samples, diffuse, specular, shading, segmin, segmax, occupied, lut, shade_params,
+    offsets, samples, diffuse, specular, segmin, segmax, occupied, lut, shade_params,
     t_stop, out,
 ):  # fmt: skip
-    """Render one TF from a sample cache into ``out`` (n_rays, 4) premultiplied RGBA.
+    """Render one TF, shaded, from a sample cache into ``out`` (n_rays, 4) premultiplied RGBA.
+
+    Unshaded caches use :func:`composite_unshaded`.
 
     ``occupied[k]`` counts LUT entries below k with non-zero alpha, so a segment whose values
     lie in [lo, hi] is empty when ``occupied[hi + 1] == occupied[lo]`` and is skipped whole.
@@ -452,15 +454,11 @@ def composite(
                 q = samples[kk]
                 a = lut[q, 3]
                 if a > 0.0:
-                    cr = lut[q, 0]
-                    cg = lut[q, 1]
-                    cb = lut[q, 2]
-                    if shading:
-                        lit = ka + kd * (diffuse[kk] * inv)
-                        sp = ks * (specular[kk] * inv)
-                        cr = min(1.0, cr * lit + sp)
-                        cg = min(1.0, cg * lit + sp)
-                        cb = min(1.0, cb * lit + sp)
+                    lit = ka + kd * (diffuse[kk] * inv)
+                    sp = ks * (specular[kk] * inv)
+                    cr = min(1.0, lut[q, 0] * lit + sp)
+                    cg = min(1.0, lut[q, 1] * lit + sp)
+                    cb = min(1.0, lut[q, 2] * lit + sp)
                     w = tr * a
                     r += w * cr
                     g += w * cg
