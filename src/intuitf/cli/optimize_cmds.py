@@ -12,6 +12,7 @@ from rich.markup import escape
 from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from intuitf.cli import options as vo
 from intuitf.errors import IntuitfError, SessionError
 
 console = Console()
@@ -217,16 +218,13 @@ def register(app: typer.Typer) -> None:
         overwrite: bool = typer.Option(
             False, "--overwrite", help="Replace a run already in the output folder."
         ),
-        shape: str = typer.Option(None, "--shape", help="Raw files: X,Y,Z"),
-        dtype: str = typer.Option(
-            None, "--dtype", help="Raw files: uint8, uint16, int16, float32, ..."
-        ),
-        byte_order: str = typer.Option(None, "--byte-order", help="Raw files: little | big"),
-        spacing: str = typer.Option(None, "--spacing", help="Voxel spacing X,Y,Z"),
-        max_dim: int = typer.Option(None, "--max-dim", help="Downsample volumes larger than this."),
+        shape: vo.ShapeOpt = None,
+        dtype: vo.DtypeOpt = None,
+        byte_order: vo.ByteOrderOpt = None,
+        spacing: vo.SpacingOpt = None,
+        max_dim: vo.MaxDimOpt = None,
     ) -> None:
         """Find transfer functions that match what you want, unattended."""
-        from intuitf.cli.options import open_volume
 
         started = time.perf_counter()
         if resume is not None:
@@ -237,7 +235,7 @@ def register(app: typer.Typer) -> None:
             vol_args = dict(
                 shape=shape, dtype=dtype, byte_order=byte_order, spacing=spacing, max_dim=max_dim
             )
-            vol = open_volume(volume, **vol_args)
+            vol = vo.open_volume(volume, **vol_args)
             for note in vol.notes:
                 console.print(f"[yellow]note:[/] {escape(note)}")
             intent = _build_intent(text, image, sketch, on, about)
@@ -418,12 +416,11 @@ def _refine_session(
 
 
 def _resume_session(run_dir: Path, budget_usd, budget_calls, base_url):
-    from intuitf.cli.options import open_volume
     from intuitf.session import RunDirectory, Session
 
     rd = RunDirectory(run_dir)
     record = rd.read_run()
-    vol = open_volume(record.get("volume_source", "phantom"), **record.get("volume_args", {}))
+    vol = vo.open_volume(record.get("volume_source", "phantom"), **record.get("volume_args", {}))
     ckpt = rd.read_checkpoint() or {}
     from intuitf.evaluator.types import Cost
 
