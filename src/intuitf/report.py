@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from intuitf.errors import SessionError
+from intuitf.session.rundir import RunDirectory, latest_generations
 from intuitf.tf.export import EXPORT_FORMATS
 
 REPORT_NAME = "report.html"
@@ -67,25 +68,6 @@ def _read_json(path: Path) -> Any:
         return None
 
 
-def _read_journal(path: Path) -> list[dict]:
-    """Complete JSON objects of the journal; a line cut short by a crash is skipped."""
-    data = _read_bytes(path)
-    if data is None:
-        return []
-    out = []
-    for line in data.decode("utf-8", errors="replace").splitlines():
-        line = line.strip()
-        if not line:
-            continue
-        try:
-            entry = json.loads(line)
-        except json.JSONDecodeError:
-            continue
-        if isinstance(entry, dict):
-            out.append(entry)
-    return out
-
-
 def _gaussian_key(tf: dict | None) -> tuple | None:
     """The Gaussians' parameters, to find a best TF among the journal's candidates."""
     try:
@@ -113,13 +95,10 @@ def collect_run(run_dir: str | Path) -> RunContents:
     run = _read_json(root / "run.json")
     contents = RunContents(name=root.resolve().name, run=run if isinstance(run, dict) else {})
 
-    by_gen: dict[int, dict] = {}
-    for e in _read_journal(root / "journal.jsonl"):
-        if e.get("type") == "generation" and isinstance(e.get("generation"), int):
-            by_gen[e["generation"]] = e  # a generation replayed after a resume: the last wins
-        elif e.get("type") == "end":
-            contents.end = e
-    contents.generations = [by_gen[g] for g in sorted(by_gen)]
+    journal = RunDirectory(root).read_journal()
+    contents.generations = latest_generations(journal)
+    ends = [e for e in journal if e.get("type") == "end"]
+    contents.end = ends[-1] if ends else None
 
     summary = _read_json(root / "best" / "summary.json")
     rating_of = {}

@@ -11,22 +11,15 @@ if TYPE_CHECKING:
     from intuitf.session.session import Session
 
 
-def evolution_records(journal: list[dict]) -> list[dict]:
-    """Per-generation figures for the evolution plot, from journal entries.
-
-    A generation replayed after a resume appears twice in the journal; the last entry wins.
-    """
-    by_gen: dict[int, dict] = {}
-    for e in journal:
-        if e.get("type") == "generation":
-            by_gen[int(e["generation"])] = e
+def evolution_records(generations: list[dict]) -> list[dict]:
+    """Per-generation figures for the evolution plot, from the journal's generation entries
+    (:meth:`RunDirectory.generations`)."""
     out = []
-    for g in sorted(by_gen):
-        e = by_gen[g]
+    for e in generations:
         ratings = [c["rating"] for c in e.get("candidates", [])] or [0.0]
         out.append(
             {
-                "generation": g,
+                "generation": e["generation"],
                 "best_rating": max(ratings),
                 "mean_rating": sum(ratings) / len(ratings),
                 "min_rating": min(ratings),
@@ -64,7 +57,7 @@ def write_run_outputs(session: Session) -> None:
             )
         summary.append({"rank": rank, "rating": rating, "tf": f"best/rank{rank:02d}.tf.json"})
     atomic_write_json(rd.best_dir / "summary.json", summary)
-    records = evolution_records(rd.read_journal())
+    records = evolution_records(rd.generations())
     if records:
         atomic_write_bytes(rd.root / "evolution.png", evolution_plot(records))
     build_report(rd.root)

@@ -22,7 +22,7 @@ import errno
 import json
 import os
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -58,6 +58,18 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
 
 def atomic_write_json(path: Path, obj: Any) -> None:
     atomic_write_bytes(path, (json.dumps(obj, indent=2) + "\n").encode("utf-8"))
+
+
+def latest_generations(entries: Iterable[dict]) -> list[dict]:
+    """The "generation" entries of a journal, one per generation, in order.
+
+    A generation replayed after a resume appears twice in the journal; the last wins.
+    """
+    by_gen: dict[int, dict] = {}
+    for e in entries:
+        if e.get("type") == "generation" and isinstance(e.get("generation"), int):
+            by_gen[e["generation"]] = e
+    return [by_gen[g] for g in sorted(by_gen)]
 
 
 class RunDirectory:
@@ -150,17 +162,24 @@ class RunDirectory:
         return list(self.iter_journal())
 
     def iter_journal(self) -> Iterator[dict]:
+        """Journal entries in order; cut-short, garbled or non-object lines are skipped."""
         if not self.journal.exists():
             return
-        with open(self.journal, encoding="utf-8") as fh:
+        with open(self.journal, encoding="utf-8", errors="replace") as fh:
             for line in fh:
                 line = line.strip()
                 if not line:
                     continue
                 try:
-                    yield json.loads(line)
+                    entry = json.loads(line)
                 except json.JSONDecodeError:
                     continue
+                if isinstance(entry, dict):
+                    yield entry
+
+    def generations(self) -> list[dict]:
+        """One "generation" entry per generation, in order (see :func:`latest_generations`)."""
+        return latest_generations(self.iter_journal())
 
     def write_checkpoint(self, state: dict) -> None:
         atomic_write_json(self.checkpoint, state)
