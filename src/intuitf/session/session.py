@@ -143,6 +143,7 @@ class Session:
         )
         self._cache = None
         self._images: dict[str, np.ndarray] = {}
+        self._renderers: dict[tuple[int, bool], Any] = {}
         self.records: list[GenerationRecord] = []
         self.generation_seconds: list[float] = []
         # One event loop for the session's life: model clients keep connections bound to it.
@@ -350,9 +351,14 @@ class Session:
         shading = self.settings.shading if shading is None else shading
         if size == self.settings.image_size and camera is None and shading == self.settings.shading:
             return self.sample_cache().render(tf)
-        r = VolumeRenderer(
-            self.volume, size=size, shading=shading, background=tuple(self.settings.background)
-        )
+        # Kept per (size, shading): a renderer computes its volume's gradient once, and the
+        # best TFs of a run are all rendered at the same output size.
+        r = self._renderers.get((size, shading))
+        if r is None:
+            r = VolumeRenderer(
+                self.volume, size=size, shading=shading, background=tuple(self.settings.background)
+            )
+            self._renderers[(size, shading)] = r
         return r.render(tf, camera or self.camera)
 
     def best(self, k: int = 1) -> list[tuple[GaussianTF, float]]:
