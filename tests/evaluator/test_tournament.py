@@ -296,3 +296,44 @@ def test_intent_defaults_and_duplicate_ids_rejected():
         asyncio.run(t.run([img(1), img(2)], ["a", "a"]))
     with pytest.raises(IntuitfError):
         SwissTournament(OracleJudge(), ASPECTS, protocol="fast")  # type: ignore[arg-type]
+
+
+def test_history_joins_the_fit_and_met_pairs_are_not_replayed():
+    qs = shuffled(16, seed=4)
+    ids = [f"q{q}" for q in qs]
+    worst = f"q{min(qs)}"
+    # Earlier verdicts: the worst player beat six others (some of them past players, gone
+    # now), and two current pairs already met.
+    history = [(worst, f"old{k}", 1.0) for k in range(3)]
+    history += [(worst, other, 1.0) for other in ids[:4] if other != worst][:3]
+    met = {frozenset(p[:2]) for p in history}
+    base = run(SwissTournament(OracleJudge(), ASPECTS, seed=3), qs)
+    with_history = run(SwissTournament(OracleJudge(), ASPECTS, seed=3), qs, history=history)
+    assert with_history.ratings[worst] > base.ratings[worst] + 50
+    assert set(with_history.ratings) == set(ids)  # past players are fitted, not reported
+    assert not any(frozenset((m.first, m.second)) in met for m in with_history.matches)
+    # The paper protocol resets ratings every tournament: history changes nothing.
+    paper = SwissTournament(OracleJudge(), ASPECTS, protocol="paper", seed=3)
+    a, b = run(paper, qs), run(paper, qs, history=history)
+    assert a.ranking == b.ranking and a.ratings == b.ratings
+
+
+def test_history_keeps_a_survivor_from_sinking_on_one_bad_verdict():
+    # The best player loses its one game of this tournament to a judge error; its twelve
+    # earlier wins (against players that are still here) keep it on top.
+    qs = [10, 20, 30, 40]
+    ids = [f"q{q}" for q in qs]
+
+    class OneError(OracleJudge):
+        async def compare(self, first, second, aspects, intent):
+            v = await super().compare(first, second, aspects, intent)
+            if 40 in (quality(first), quality(second)):
+                flipped = v.overall.swapped()
+                return Verdict({"quality": flipped}, flipped, flipped.score, cost=Cost(calls=1))
+            return v
+
+    history = [("q40", other, 1.0) for other in ("p1", "p2", "p3", "p4") for _ in range(3)]
+    t = SwissTournament(OneError(), ASPECTS, seed=0, rounds=1, recheck_above=None)
+    assert run(t, qs).ranking[0] != "q40"
+    assert run(t, qs, history=history).ranking[0] == "q40"
+    assert set(ids) == set(run(t, qs, history=history).ranking)

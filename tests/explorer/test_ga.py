@@ -211,3 +211,37 @@ def test_bad_set_stage_changes_nothing():
     with pytest.raises(ValueError):
         ex.set_stage("nonsense")
     assert json.dumps(ex.state_dict()) == before
+
+
+def test_local_steps_come_from_the_top_of_the_ranking(target_tf):
+    ex = Explorer(population=20, n_gaussians=4, generations=6, seed=4)
+    lut = target_tf.lut(64)
+    for _ in range(3):
+        cands = ex.ask()
+        ranking = rank_by_target(cands, lut)
+        n_elite = max(1, int(ex.stage.elite_share(ex.progress) * 20 + 1e-9))
+        expected = round(ex.stage.local_share.at(ex.progress) * (20 - n_elite))
+        ex.tell(ranking)
+        local = [c for c in ex.ask() if c.origin == "local"]
+        assert expected > 0 and len(local) == expected
+        top = set(ranking[: max(n_elite, 4)])
+        assert all(len(c.parents) == 1 and c.parents[0] in top for c in local)
+
+
+def _near_palette(tfs, palette, tol=0.25) -> float:
+    colours = np.array([g.color for tf in tfs for g in tf.gaussians])
+    d = np.abs(colours[:, None, :] - np.array(palette)[None]).max(axis=2).min(axis=1)
+    return float((d < tol).mean())
+
+
+def test_palette_colours_new_gaussians_and_survives_the_state():
+    palette = [(0.95, 0.55, 0.15), (0.35, 0.6, 0.95)]
+    with_palette = Explorer(population=40, n_gaussians=5, seed=1, palette=palette)
+    without = Explorer(population=40, n_gaussians=5, seed=1)
+    share = with_palette.stage.palette_share
+    assert _near_palette([c.tf for c in with_palette.ask()], palette) > share - 0.1
+    assert _near_palette([c.tf for c in without.ask()], palette) < 0.25
+    state = json.loads(json.dumps(with_palette.state_dict()))
+    assert Explorer.from_state(state).palette == tuple(tuple(c) for c in palette)
+    with pytest.raises(ValueError, match="palette colour"):
+        Explorer(population=4, palette=[(1.0, 2.0, 0.0)])

@@ -32,7 +32,7 @@ def _histogram() -> np.ndarray:
 def test_histogram_seeds_land_on_the_peaks():
     ex = Explorer(population=30, n_gaussians=5, seed=3, histogram=_histogram())
     seeds = [c for c in ex.ask() if c.origin == "seed"]
-    assert len(seeds) == 10  # a third of the population
+    assert len(seeds) == 20  # two thirds of the population
     for c in seeds:
         means = np.array([g.mean for g in c.tf.gaussians])
         for p in PEAKS:

@@ -73,14 +73,15 @@ def test_height_steps_are_multiplicative():
 def test_toggle_hides_a_visible_feature_and_reveals_a_hidden_one():
     rng = np.random.default_rng(4)
     shown = Gaussian(0.3, 0.02, 0.2, (1.0, 0.5, 0.5))
-    hidden = Gaussian(0.7, 0.02, B.height_floor, (0.5, 0.5, 1.0))
+    hidden = Gaussian(0.7, 0.02, 0.0, (0.5, 0.5, 1.0))
     tf = GaussianTF((shown, hidden))
     p = replace(
         INITIALIZE.mutation_params(0.0), rate=0.0, mean_rate=0.0, color_rate=0.0, toggle_prob=1.0
     )
     for _ in range(50):
         out = mutate(tf, rng, p, B)
-        assert out.gaussians[0].height == B.height_floor
+        # Hidden is 0, not the floor: 0.001 per voxel over air is a visible haze.
+        assert out.gaussians[0].height == 0.0
         assert B.height_init[0] <= out.gaussians[1].height <= B.height_init[1]
 
 
@@ -245,3 +246,45 @@ def test_sampled_heights_favour_low_opacity():
     h = np.array([g.height for _ in range(400) for g in _tf(rng).gaussians])
     assert h.min() >= 0.005 and h.max() <= 0.5
     assert np.median(h) < 0.1  # log-uniform on [0.005, 0.5]: median 0.05
+
+
+def test_crossover_pairs_gaussians_on_the_same_material_by_mean():
+    # a has an extra Gaussian below the others: by position it would swap 0.1 with 0.5.
+    a = GaussianTF(
+        (
+            Gaussian(0.1, 0.02, 0.1, (1.0, 0.0, 0.0)),
+            Gaussian(0.5, 0.02, 0.1, (0.0, 1.0, 0.0)),
+            Gaussian(0.8, 0.02, 0.1, (0.0, 0.0, 1.0)),
+        )
+    )
+    b = GaussianTF(
+        (Gaussian(0.52, 0.03, 0.2, (1.0, 1.0, 0.0)), Gaussian(0.79, 0.03, 0.2, (0.0, 1.0, 1.0)))
+    )
+    rng = np.random.default_rng(0)
+    kw = dict(attr_prob=1.0, groups=(("color",),))
+    ca, _ = crossover(a, b, rng, by_mean=True, **kw)
+    assert [g.color for g in ca.gaussians] == [
+        (1.0, 0.0, 0.0),  # unpaired: kept
+        (1.0, 1.0, 0.0),  # from b's 0.52
+        (0.0, 1.0, 1.0),  # from b's 0.79
+    ]
+    cp, _ = crossover(a, b, rng, by_mean=False, **kw)
+    assert [g.color for g in cp.gaussians][:2] == [(1.0, 1.0, 0.0), (0.0, 1.0, 1.0)]
+
+
+def test_recolour_mutation_draws_from_the_palette():
+    rng = np.random.default_rng(5)
+    palette = ((0.95, 0.55, 0.15), (0.35, 0.6, 0.95))
+    tf = GaussianTF((Gaussian(0.5, 0.02, 0.1, (0.5, 0.5, 0.5)),))
+    p = replace(CUSTOMIZE.mutation_params(0.0, palette), rate=0.0, mean_rate=0.0, swap_prob=0.0)
+    always = replace(p, recolor_prob=1.0)
+    colours = np.array([mutate(tf, rng, always, B).gaussians[0].color for _ in range(200)])
+    dist = np.abs(colours[:, None, :] - np.array(palette)[None]).max(axis=2).min(axis=1)
+    # Near one of the palette's colours: only a small HSL jitter (a uniform draw over the
+    # colour space would be this close about 1 time in 20).
+    assert (dist < 0.4).all() and np.median(dist) < 0.1
+    near = [(np.abs(colours - c).max(axis=1) < 0.25).mean() for c in palette]
+    assert min(near) > 0.3  # both palette colours are used
+    # Without a palette the same rate does nothing special: grey stays near grey.
+    no_palette = replace(always, palette=(), color_rate=0.0)
+    assert mutate(tf, rng, no_palette, B).gaussians[0].color == (0.5, 0.5, 0.5)

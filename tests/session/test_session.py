@@ -7,6 +7,7 @@ import json
 import pytest
 
 from intuitf.errors import BudgetExhausted
+from intuitf.evaluator.tournament import default_rounds
 from intuitf.evaluator.types import Intent
 from intuitf.session import RunDirectory, RunSettings, Session
 from intuitf.volume import phantom
@@ -175,3 +176,20 @@ def test_full_disk_ends_cleanly_and_the_run_resumes(vol, tmp_path, monkeypatch):
     out2 = resumed.run()
     assert out2.completed
     assert _best_tfs(out2) == _best_tfs(ref)
+
+
+def test_verdicts_of_the_stage_carry_over_and_reset_with_the_stage(vol, tmp_path):
+    s = Session.create(
+        vol, intent=_intent(), settings=RunSettings(**SETTINGS), run_dir=tmp_path / "r"
+    )
+    s.step()  # initialize's only generation: the stage changes after it
+    assert s.stage == "customize" and s.stage_games == []
+    rec = s.step()
+    n = len(rec.candidates)
+    assert len(s.stage_games) == default_rounds(n) * (n // 2)  # every verdict of the stage
+    assert {g[0] for g in s.stage_games} <= {c["id"] for c in rec.candidates}
+    ckpt = json.loads((tmp_path / "r" / "checkpoint.json").read_text())
+    assert [tuple(g) for g in ckpt["stage_games"]] == [tuple(g) for g in s.stage_games]
+    s.step()  # the next tournament fits them with its own verdicts: the list grows
+    assert len(s.stage_games) > len(ckpt["stage_games"])
+    s.close()

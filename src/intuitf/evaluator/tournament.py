@@ -32,7 +32,12 @@ Two protocols share this code:
       on the Elo scale;
     - ``prior`` ratings (elites surviving from the last generation) seed the first round's
       pairing and the Elo start, but not the fit: anchoring survivors at their inflated ratings
-      (they were chosen *because* they rated high) measurably lowered Kendall's tau.
+      (they were chosen *because* they rated high) measurably lowered Kendall's tau;
+    - ``history``, the verdicts of earlier tournaments under the same aspects and intent, joins
+      the fit instead: a survivor keeps the evidence it earned (its rating is the fit of all
+      its games, not a number carried over), so one unlucky verdict no longer sinks a
+      candidate that won a dozen before. Pairs that met in the history are not paired again
+      (a cached judge would repeat its verdict, which is no new evidence).
 
 Verdicts with ``p_first`` 0.5 (ties, or technical errors the judge reported as ties) score half a
 point each and are recorded, so the same pair never meets twice in one tournament. Results are
@@ -252,8 +257,13 @@ class SwissTournament:
         ids: Sequence[str],
         prior: dict[str, float] | None = None,
         progress: ProgressFn | None = None,
+        history: Sequence[tuple[str, str, float]] = (),
     ) -> TournamentResult:
         """Play the tournament and return ratings and ranking.
+
+        ``history`` holds earlier verdicts as ``(first id, second id, score of first)``; ids not
+        among ``ids`` are past players. The efficient protocol fits them with this
+        tournament's verdicts (see the module notes); the paper protocol ignores them.
 
         If the judge raises :class:`BudgetExhausted` or :class:`JudgeError`, the other matches of
         that round are awaited (they are paid for), and the exception is re-raised with an
@@ -269,7 +279,7 @@ class SwissTournament:
             raise IntuitfError(
                 "A tournament got duplicate ids.", hint="Give every candidate a unique id."
             )
-        state = _State(self, images, ids, prior, progress)
+        state = _State(self, images, ids, prior, progress, history)
         return await state.play()
 
     def planned_rounds(self, n: int) -> int:
@@ -292,6 +302,7 @@ class _State:
         ids: list[str],
         prior: dict[str, float] | None,
         progress: ProgressFn | None,
+        history: Sequence[tuple[str, str, float]] = (),
     ) -> None:
         self.cfg = cfg
         self.images = images
@@ -311,6 +322,22 @@ class _State:
         # A fixed random order breaks rating ties, so equal ratings do not favour input order.
         self.tiebreak = self.rng.permutation(self.n)
         self.met: set[frozenset[int]] = set()
+        #: Earlier verdicts, indexed over the current players followed by past ones.
+        self.history: list[tuple[int, int, float]] = []
+        self.n_players = self.n
+        if cfg.protocol == "efficient" and history:
+            index = {pid: i for i, pid in enumerate(ids)}
+            for first, second, score in history:
+                for pid in (str(first), str(second)):
+                    if pid not in index:
+                        index[pid] = len(index)
+                i, j = index[str(first)], index[str(second)]
+                if i == j:
+                    continue
+                self.history.append((i, j, min(1.0, max(0.0, float(score)))))
+                if i < self.n and j < self.n:
+                    self.met.add(frozenset((i, j)))
+            self.n_players = len(index)
         self.had_bye: set[int] = set()
         self.matches: list[MatchRecord] = []
         self.games: list[tuple[int, int, float]] = []
@@ -344,19 +371,22 @@ class _State:
         The efficient protocol sorts by the Bradley-Terry fit of all verdicts so far, which
         pairs players that are truly close more often than the path-dependent Elo sum does.
         """
-        efficient = self.cfg.protocol == "efficient" and self.games
-        rating = self._fit() if efficient else self.elo  # before any game: the priors
+        efficient = self.cfg.protocol == "efficient" and (self.games or self.history)
+        rating = self._fit() if efficient else self.elo  # before any evidence: the priors
         return sorted(range(self.n), key=lambda i: (-rating[i], self.tiebreak[i]))
 
     def _fit(self) -> np.ndarray:
         # Priors are not anchors: survivors were picked for their (noisily) high rating, so
         # anchoring them there carries that winner's-curse bias into the new ranking; measured
         # in the benchmark, it lowered Kendall's tau. They only seed the first round's pairing.
-        anchors = np.full(self.n, self.cfg.initial_rating)
-        return bradley_terry(self.n, self.games, anchors, self.cfg.anchor_weight)
+        anchors = np.full(self.n_players, self.cfg.initial_rating)
+        games = self.history + self.games
+        return bradley_terry(self.n_players, games, anchors, self.cfg.anchor_weight)[: self.n]
 
     def _pair(self, rnd: int) -> tuple[list[tuple[int, int]], int | None]:
-        if rnd == 1 and not (self.cfg.protocol == "efficient" and self.has_prior.any()):
+        if rnd == 1 and not (
+            self.cfg.protocol == "efficient" and (self.has_prior.any() or self.history)
+        ):
             order = list(self.rng.permutation(self.n))
         else:
             order = self._order()

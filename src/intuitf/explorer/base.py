@@ -33,6 +33,16 @@ def rng_from_state(state: dict) -> np.random.Generator:
     return np.random.Generator(bg)
 
 
+def _palette(colours: Sequence[Sequence[float]]) -> tuple[tuple[float, float, float], ...]:
+    out = []
+    for c in colours:
+        rgb = tuple(float(v) for v in c)
+        if len(rgb) != 3 or not all(0.0 <= v <= 1.0 for v in rgb):
+            raise ValueError(f"A palette colour must be three values in [0, 1], got {c!r}.")
+        out.append(rgb)
+    return tuple(out)  # type: ignore[return-value]
+
+
 class BaseExplorer:
     """Ask/tell skeleton: ``ask()`` gives the population, ``tell(ranking)`` moves on.
 
@@ -49,6 +59,9 @@ class BaseExplorer:
             results); the bounds widen to hold them. At most ``population`` are used.
         bounds: where parameters may go (:class:`Bounds`; default: normalised defaults).
         presets: the stage presets the names resolve to (default :data:`STAGES`).
+        palette: RGB colours (0..1) the intent asks for (see
+            :func:`intuitf.evaluator.palette.intent_palette`); the stage presets say how
+            often new colours come from it. Empty: colours come from the whole colour space.
 
     Subclasses implement :meth:`_next_population` (and may extend state and stages).
     Generations are counted over the whole run; ``progress`` restarts at each stage.
@@ -69,6 +82,7 @@ class BaseExplorer:
         initial: Sequence[GaussianTF] = (),
         bounds: Bounds | None = None,
         presets: Mapping[str, StagePreset] | None = None,
+        palette: Sequence[Sequence[float]] = (),
     ) -> None:
         if int(population) < 2:
             raise ValueError(f"population must be at least 2, got {population}.")
@@ -80,6 +94,7 @@ class BaseExplorer:
         self.n_gaussians = int(n_gaussians)
         self.seed = int(seed)
         self.value_range = tuple(float(v) for v in value_range) if value_range else None
+        self.palette = _palette(palette)
         initial = list(initial)[: self.population_size]
         self.bounds = (bounds or Bounds()).covering(initial)
         self.presets: dict[str, StagePreset] = dict(presets or STAGES)
@@ -250,6 +265,13 @@ class BaseExplorer:
             tf = replace(tf, name=cid, metadata={})
         return Candidate(cid, tf, self._generation, origin, tuple(parents))
 
+    def _color(self, rng: np.random.Generator) -> tuple[float, float, float]:
+        """A new Gaussian's colour: from the palette (``palette_share`` of the time) or anywhere."""
+        # Without a palette no random number is spent, so such runs stay as they were.
+        if self.palette and rng.random() < self._preset.palette_share:
+            return self.bounds.sample_palette_color(rng, self.palette)
+        return self.bounds.sample_color(rng)
+
     def _random(self) -> GaussianTF:
         return random_tf(
             self._rng,
@@ -257,11 +279,17 @@ class BaseExplorer:
             self.bounds,
             sampling=self._preset.init_sampling,
             value_range=self.value_range,
+            color=self._color,
         )
 
     def _seeded(self) -> GaussianTF:
         return seeded_tf(
-            self._rng, self._materials, self.n_gaussians, self.bounds, value_range=self.value_range
+            self._rng,
+            self._materials,
+            self.n_gaussians,
+            self.bounds,
+            value_range=self.value_range,
+            color=self._color,
         )
 
     def _fresh_population(
@@ -310,7 +338,7 @@ class BaseExplorer:
         return self._new(tf, origin)
 
     def _variant_params(self) -> MutationParams:
-        return self._preset.mutation_params(0.0)
+        return self._preset.mutation_params(0.0, self.palette)
 
     def _fill_with_variants(
         self, pop: list[Candidate], size: int, parents: Sequence[Candidate] | None = None
@@ -370,6 +398,7 @@ class BaseExplorer:
             "history": list(self._history),
             "best": self._best.to_dict() if self._best else None,
             "materials": [[m.center, m.spread, m.fraction] for m in self._materials],
+            "palette": [list(c) for c in self.palette],
             "rng": rng_state(self._rng),
         }
 
@@ -401,6 +430,7 @@ class BaseExplorer:
         self._history = [str(h) for h in state["history"]]
         self._best = Candidate.from_dict(state["best"]) if state.get("best") else None
         self._materials = [Material(*m) for m in state.get("materials", [])]
+        self.palette = _palette(state.get("palette", ()))
         self._rng = rng_from_state(state["rng"])
         self._restore_extra(state)
         return self

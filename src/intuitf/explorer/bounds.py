@@ -144,6 +144,21 @@ class Bounds:
         lum = rng.uniform(*self.lightness)
         return hsl_to_rgb(h, s, lum)
 
+    def sample_palette_color(
+        self, rng: np.random.Generator, palette: Sequence[Sequence[float]]
+    ) -> tuple[float, float, float]:
+        """One of ``palette``'s colours, slightly varied (in HSL) and moved into the bounds.
+
+        The variation (hue ±0.02, saturation and lightness ±0.05, one standard deviation)
+        keeps copies of one hint colour apart, so duplicate removal does not reject them.
+        """
+        h, s, lum = rgb_to_hsl(palette[int(rng.integers(len(palette)))])
+        h = h + rng.normal(0.0, 0.02)
+        h = h % 1.0 if self.hue_circular else _clip(h, self.hue)
+        s = _clip(s + rng.normal(0.0, 0.05), self.saturation)
+        lum = _clip(lum + rng.normal(0.0, 0.05), self.lightness)
+        return self.clip_color(hsl_to_rgb(h, s, lum))
+
     # -- serialisation ---------------------------------------------------------------------
     def to_dict(self) -> dict:
         return {

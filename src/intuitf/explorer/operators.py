@@ -51,6 +51,10 @@ class MutationParams:
     channel_prob: float = 0.05  # per Gaussian: permute its own RGB channels instead
     additive: bool = False
     toggle_prob: float = 0.0  # per Gaussian: switch the feature off, or back on if it is off
+    #: Colours the intent asks for (RGB); with ``recolor_prob`` per Gaussian, its colour is
+    #: replaced by one of them (slightly varied) instead of taking HSL steps.
+    palette: tuple[tuple[float, float, float], ...] = ()
+    recolor_prob: float = 0.0
 
     def forced(self) -> MutationParams:
         """Every attribute changes: used to push a near-duplicate away from its twin."""
@@ -60,6 +64,9 @@ class MutationParams:
 def _mutate_color(
     color: tuple[float, float, float], rng: np.random.Generator, p: MutationParams, b: Bounds
 ) -> tuple[float, float, float]:
+    if p.palette and rng.random() < p.recolor_prob:
+        # A jump to a colour the intent names: HSL steps take many generations to get there.
+        return b.sample_palette_color(rng, p.palette)
     if rng.random() < p.channel_prob:
         # Recombine the colour's own channels: a new hue of the same saturation and lightness.
         perm = rng.permutation(3)
@@ -121,10 +128,12 @@ def mutate(
         if p.toggle_prob and rng.random() < p.toggle_prob:
             # Which materials are visible at all is the biggest decision in a TF; small
             # multiplicative steps take many generations to hide or reveal one, a toggle
-            # does it at once (hidden: just above the floor; shown: a fresh initial height).
+            # does it at once (hidden: height 0; shown: a fresh initial height). Hidden
+            # means 0, not the floor: over a material as common as air, even 0.001 per
+            # voxel adds up to a haze over the whole picture.
             lo, hi = b.height_init
             if height > lo:
-                height = b.height_floor
+                height = max(b.height[0], 0.0)
             else:
                 height = float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
         gs[i] = replace(g, mean=mean, width=width, height=height)
@@ -151,10 +160,12 @@ def crossover(
     attr_prob: float = 0.4,
     groups: Sequence[Sequence[str]] = PAPER_GROUPS,
     fallback_prob: float = 0.5,
+    by_mean: bool = False,
 ) -> tuple[GaussianTF, GaussianTF]:
     """Two children that exchange Gaussian attributes between parents ``a`` and ``b``.
 
-    Free Gaussians are paired by position (k-th lowest mean with k-th lowest mean). For each
+    Free Gaussians are paired by position (k-th lowest mean with k-th lowest mean, or with
+    ``by_mean`` the pairing of least total distance between means). For each
     pair, every attribute group (e.g. colour; position; shape = width + height) is exchanged
     independently with ``attr_prob``; if none was, one random group is exchanged with
     ``fallback_prob``. Frozen Gaussians take no part. Children keep their parent's order.
@@ -166,7 +177,7 @@ def crossover(
     ga, gb = list(a.gaussians), list(b.gaussians)
     ia = sorted((i for i, g in enumerate(ga) if not g.frozen), key=lambda i: ga[i].mean)
     ib = sorted((i for i, g in enumerate(gb) if not g.frozen), key=lambda i: gb[i].mean)
-    for i, j in zip(ia, ib, strict=False):
+    for i, j in _pairs(ga, gb, ia, ib, by_mean):
         chosen = [grp for grp in groups if rng.random() < attr_prob]
         if not chosen and rng.random() < fallback_prob:
             chosen = [groups[int(rng.integers(len(groups)))]]
@@ -174,6 +185,24 @@ def crossover(
         if attrs:
             ga[i], gb[j] = _swap(ga[i], gb[j], attrs)
     return a.with_gaussians(ga), b.with_gaussians(gb)
+
+
+def _pairs(
+    ga: Sequence[Gaussian], gb: Sequence[Gaussian], ia: list[int], ib: list[int], by_mean: bool
+) -> list[tuple[int, int]]:
+    """Which Gaussian of ``a`` exchanges attributes with which of ``b``.
+
+    ``by_mean``: the pairing with the least total distance between means (so a feature meets
+    the other parent's feature on the same material, even when one parent has an extra
+    Gaussian below it); otherwise k-th lowest with k-th lowest, as the paper does.
+    """
+    if not by_mean or not ia or not ib:
+        return list(zip(ia, ib, strict=False))
+    from scipy.optimize import linear_sum_assignment
+
+    cost = np.abs(np.subtract.outer([ga[i].mean for i in ia], [gb[j].mean for j in ib]))
+    rows, cols = linear_sum_assignment(cost)
+    return [(ia[r], ib[c]) for r, c in zip(rows, cols, strict=True)]
 
 
 def roulette(fitness: Sequence[float], k: int, rng: np.random.Generator) -> np.ndarray:

@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from intuitf.explorer.bounds import Bounds
 from intuitf.tf.defaults import Material, find_materials
 from intuitf.tf.gaussian import Gaussian, GaussianTF
+
+#: Draws a Gaussian's colour: ``color(rng) -> (r, g, b)``.
+ColorSampler = Callable[[np.random.Generator], tuple[float, float, float]]
 
 
 def _clip(v: float, r: tuple[float, float]) -> float:
@@ -35,18 +38,21 @@ def random_tf(
     *,
     sampling: str = "log",
     value_range: tuple[float, float] | None = None,
+    color: ColorSampler | None = None,
 ) -> GaussianTF:
     """``n_gaussians`` Gaussians drawn within ``bounds``, sorted by mean.
 
     Means and colours (in HSL) are uniform; widths and heights log-uniform (``sampling``
-    "log") or uniform within the hard bounds ("uniform", the authors' way).
+    "log") or uniform within the hard bounds ("uniform", the authors' way). ``color``
+    replaces the colour draw (for instance to draw from the intent's palette).
     """
+    color = color or bounds.sample_color
     gs = []
     for _ in range(n_gaussians):
         mean = float(rng.uniform(*bounds.mean))
         width = _width(rng, bounds, sampling)
         height = _height(rng, bounds, sampling)
-        gs.append(Gaussian(mean, width, height, bounds.sample_color(rng)))
+        gs.append(Gaussian(mean, width, height, color(rng)))
     return GaussianTF(tuple(sorted(gs, key=lambda g: g.mean)), value_range=value_range)
 
 
@@ -67,6 +73,7 @@ def seeded_tf(
     bounds: Bounds,
     *,
     value_range: tuple[float, float] | None = None,
+    color: ColorSampler | None = None,
 ) -> GaussianTF:
     """A TF whose Gaussians sit on the volume's materials, so its rendering shows them.
 
@@ -74,8 +81,9 @@ def seeded_tf(
     Gaussians), centred near the material's value with about its spread. Gaussians left over
     go to the ranges between neighbouring materials (where boundaries between materials, such
     as a surface, live) and then anywhere. Heights and colours are random: which material is
-    opaque and in which colour is for the search to find.
+    opaque and in which colour is for the search to find (``color`` as in :func:`random_tf`).
     """
+    color = color or bounds.sample_color
     mats = list(materials)
     if len(mats) > n_gaussians:
         pick = sorted(int(i) for i in rng.choice(len(mats), size=n_gaussians, replace=False))
@@ -84,7 +92,7 @@ def seeded_tf(
     for m in mats:
         mean = _clip(m.center + rng.normal(0.0, 0.25 * m.spread), bounds.mean)
         width = _clip(max(m.spread, bounds.width[0]) * math.exp(rng.normal(0.0, 0.4)), bounds.width)
-        gs.append(Gaussian(mean, width, bounds.sample_height(rng), bounds.sample_color(rng)))
+        gs.append(Gaussian(mean, width, bounds.sample_height(rng), color(rng)))
     gaps = [(a.center + b.center) / 2.0 for a, b in zip(mats[:-1], mats[1:], strict=False)]
     order = rng.permutation(len(gaps)) if gaps else []
     for k in order:
@@ -92,18 +100,14 @@ def seeded_tf(
             break
         a, b = mats[int(k)], mats[int(k) + 1]
         mean = _clip(gaps[int(k)] + rng.normal(0.0, 0.1 * (b.center - a.center)), bounds.mean)
-        gs.append(
-            Gaussian(
-                mean, bounds.sample_width(rng), bounds.sample_height(rng), bounds.sample_color(rng)
-            )
-        )
+        gs.append(Gaussian(mean, bounds.sample_width(rng), bounds.sample_height(rng), color(rng)))
     while len(gs) < n_gaussians:
         gs.append(
             Gaussian(
                 float(rng.uniform(*bounds.mean)),
                 bounds.sample_width(rng),
                 bounds.sample_height(rng),
-                bounds.sample_color(rng),
+                color(rng),
             )
         )
     return GaussianTF(tuple(sorted(gs, key=lambda g: g.mean)), value_range=value_range)

@@ -43,7 +43,7 @@ class RandomSearchExplorer(BaseExplorer):
                 mean=float(rng.uniform(*b.mean)),
                 width=b.sample_width(rng),
                 height=b.sample_height(rng),
-                color=b.sample_color(rng),
+                color=self._color(rng),
             )
             for g in tf.gaussians
         ]

@@ -44,7 +44,13 @@ class StagePreset:
     whose limit exceeds the progress applies. ``seed_share`` is the part of a fresh
     population placed on the histogram's materials. ``init_sampling`` is "log" (heights and
     widths log-uniform within :attr:`Bounds.height_init` / :attr:`Bounds.width`) or
-    "uniform" (uniform within the hard bounds, as the authors did).
+    "uniform" (uniform within the hard bounds, as the authors did). When the explorer has a
+    palette (colours the intent asks for), ``palette_share`` of new colours are drawn from it
+    and a mutation recolours a Gaussian from it with ``recolor_prob``. ``local_share`` of the
+    children that are not elites are local steps from the elites (one attribute of one
+    Gaussian changed, :func:`~intuitf.explorer.operators.mutate_one`); the rest are bred by
+    roulette selection, crossover and mutation. ``pair_by_mean``: crossover pairs each
+    Gaussian with the other parent's nearest one (else k-th lowest with k-th lowest).
     """
 
     name: str
@@ -68,9 +74,13 @@ class StagePreset:
     elite_shares: tuple[tuple[float, float], ...] = ((0.4, 0.05), (0.7, 0.10), (1.01, 0.15))
     pressure: PressureSchedule = field(default_factory=PressureSchedule)
     dedup: bool = True
-    seed_share: float = 1.0 / 3.0
+    seed_share: float = 2.0 / 3.0
     init_sampling: str = "log"
     freeze_unselected: bool = False
+    palette_share: float = 0.8
+    recolor_prob: float = 0.1
+    local_share: Decay = _const(0.25)
+    pair_by_mean: bool = True
 
     def __post_init__(self) -> None:
         if self.aspects not in ASPECT_SETS:
@@ -80,8 +90,8 @@ class StagePreset:
                 f"init_sampling must be 'log' or 'uniform', got {self.init_sampling!r}."
             )
 
-    def mutation_params(self, progress: float) -> MutationParams:
-        """Rates and steps at ``progress`` (0..1) through the stage."""
+    def mutation_params(self, progress: float, palette: tuple = ()) -> MutationParams:
+        """Rates and steps at ``progress`` (0..1) through the stage (``palette``: see above)."""
         rate = self.mutation_rate.at(progress)
         return MutationParams(
             rate=rate,
@@ -96,6 +106,8 @@ class StagePreset:
             channel_prob=self.channel_prob,
             toggle_prob=self.toggle_prob,
             additive=self.additive_steps,
+            palette=tuple(palette),
+            recolor_prob=self.recolor_prob,
         )
 
     def elite_share(self, progress: float) -> float:
@@ -146,16 +158,19 @@ INITIALIZE = StagePreset(name="initialize", aspects="quality", toggle_prob=0.06)
 CUSTOMIZE = StagePreset(
     name="customize",
     aspects="intent",
-    mutation_rate=Decay(0.45, 0.12),
+    mutation_rate=Decay(0.2, 0.08),
     mean_rate_factor=0.25,
     mean_step=Decay(0.01, 0.003),
     width_step=Decay(0.3, 0.08),
     height_step=Decay(0.7, 0.15),
-    color_rate=Decay(0.5, 0.15),
+    color_rate=Decay(0.2, 0.08),
     hue_step=Decay(0.1, 0.02),
     sl_step=Decay(0.25, 0.05),
     swap_prob=0.25,
     toggle_prob=0.04,
+    crossover_rate=Decay(0.6, 0.4),
+    recolor_prob=0.15,
+    local_share=_const(0.5),
 )
 
 #: Refinement: only the selected Gaussians evolve (the rest are frozen); edit aspects.
@@ -174,6 +189,7 @@ REFINE = StagePreset(
     crossover_rate=Decay(0.7, 0.5),
     seed_share=0.0,
     freeze_unselected=True,
+    local_share=_const(0.4),
 )
 
 STAGES: dict[str, StagePreset] = {p.name: p for p in (INITIALIZE, CUSTOMIZE, REFINE)}
@@ -187,7 +203,8 @@ def paper_settings() -> dict[str, StagePreset]:
     hue step 0.15→0.1 radians (0.024→0.016 of a turn, what their code effectively did) and
     saturation/lightness 0.2→0.05; colour swap 0.3; crossover always, each of mean, width,
     height and colour exchanged with 0.6; elite share 5/10/15 %; uniform initial sampling,
-    no histogram seeds and no duplicate removal. Intent stage: mean rate and step × 0.1.
+    no histogram seeds, no palette and no duplicate removal. Intent stage: mean rate and
+    step × 0.1.
     Elites pass unchanged here (their code lost them, a bug not kept).
     """
     two_pi = 6.283185307179586
@@ -212,6 +229,10 @@ def paper_settings() -> dict[str, StagePreset]:
         dedup=False,
         seed_share=0.0,
         init_sampling="uniform",
+        palette_share=0.0,
+        recolor_prob=0.0,
+        local_share=_const(0.0),
+        pair_by_mean=False,
     )
     customize = replace(
         base,

@@ -86,6 +86,22 @@ def _generation_seed(seed: int, generation: int) -> int:
     return int.from_bytes(h[:4], "little")
 
 
+def _palette_hint(intent: Intent, settings: RunSettings) -> list[tuple[float, float, float]]:
+    """The colours the intent asks for, as a hint for the explorer (see ``RunSettings``)."""
+    if not settings.palette_hint:
+        return []
+    from intuitf.evaluator.palette import intent_palette
+
+    return intent_palette(intent, background=tuple(settings.background))
+
+
+def _games_touching(
+    games: Sequence[tuple[str, str, float]], ids: set[str]
+) -> list[tuple[str, str, float]]:
+    """The verdicts with at least one player among ``ids`` (the rest no longer matter)."""
+    return [g for g in games if g[0] in ids or g[1] in ids]
+
+
 def _aspects_for_stage(stage_aspects: str, intent: Intent) -> list[Aspect]:
     from intuitf.evaluator.aspects import aspects_for, aspects_for_intent
 
@@ -118,6 +134,7 @@ class Session:
         ratings: dict[str, float] | None = None,
         last_ranking: list[str] | None = None,
         population_tfs: dict[str, GaussianTF] | None = None,
+        stage_games: Sequence[Sequence] = (),
     ) -> None:
         from intuitf.render import Camera, VolumeRenderer
 
@@ -134,6 +151,11 @@ class Session:
         self.ratings: dict[str, float] = dict(ratings or {})
         self.last_ranking: list[str] = list(last_ranking or [])
         self.tfs: dict[str, GaussianTF] = dict(population_tfs or {})
+        #: The current stage's verdicts so far, (first id, second id, score of first): the
+        #: tournament fits them with each new generation's, so survivors keep their evidence.
+        self.stage_games: list[tuple[str, str, float]] = [
+            (str(a), str(b), float(s)) for a, b, s in stage_games
+        ]
         self.camera = Camera.from_dict(settings.camera) if settings.camera else Camera()
         self.renderer = VolumeRenderer(
             volume,
@@ -185,6 +207,7 @@ class Session:
             histogram=counts,
             value_range=volume.value_range,
             initial=list(initial),
+            palette=_palette_hint(intent, settings),
         )
         if plan[0][0] == "refine":
             if len(initial) != 1 or not intent.selected:
@@ -302,6 +325,7 @@ class Session:
             ratings={k: float(v) for k, v in ckpt.get("ratings", {}).items()},
             last_ranking=list(ckpt.get("ranking", [])),
             population_tfs={k: GaussianTF.from_dict(v) for k, v in ckpt.get("tfs", {}).items()},
+            stage_games=ckpt.get("stage_games", []),
         )
 
     # -- state ----------------------------------------------------------------------------
@@ -395,6 +419,7 @@ class Session:
         }.get(self.stage, "quality")
         aspects = _aspects_for_stage(stage_aspects, self.intent)
         prior = {cid: self.ratings[cid] for cid in ids if cid in self.ratings}
+        history = list(self.stage_games)
         tournament = SwissTournament(
             self.judge,
             aspects,
@@ -408,7 +433,7 @@ class Session:
 
         try:
             result = self._run_async(
-                tournament.run(images, ids, prior=prior or None, progress=on_round)
+                tournament.run(images, ids, prior=prior or None, progress=on_round, history=history)
             )
         except (BudgetExhausted, JudgeError) as exc:
             partial = getattr(exc, "partial", None)
@@ -477,9 +502,13 @@ class Session:
         keep = set(ids)
         self._images = {k: v for k, v in self._images.items() if k in keep}
         self.tfs = {k: v for k, v in self.tfs.items() if k in keep}
+        self.stage_games = history + [
+            (m.first, m.second, float(m.verdict.p_first)) for m in result.matches
+        ]
 
         self.generation += 1
         if self.generation >= self._stage_end() and self.stage_index + 1 < len(self.plan):
+            self.stage_games = []  # other aspects: earlier verdicts answer another question
             self.stage_index += 1
             stage, n = self.plan[self.stage_index]
             self.explorer.set_stage(stage, generations=n)
@@ -610,6 +639,7 @@ class Session:
                 "ratings": self.ratings,
                 "ranking": self.last_ranking,
                 "tfs": {k: v.to_dict() for k, v in self.tfs.items()},
+                "stage_games": [list(g) for g in self.stage_games],
             }
         )
 

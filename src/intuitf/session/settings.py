@@ -15,6 +15,9 @@ class RunSettings:
     intent spends about a third of its generations in ``initialize`` (quality only, to find
     the volume's structures) and the rest in ``customize`` (the intent); a run without an
     intent stays in ``initialize``.
+
+    ``palette_hint``: draw part of the new colours from those the intent asks for (the
+    reference picture's dominant colours, the sketch's strokes, the colour words of the text).
     """
 
     population: int = 32
@@ -31,6 +34,7 @@ class RunSettings:
     top_k: int = 4
     init_share: float = 0.34
     stages: list[tuple[str, int]] = field(default_factory=list)
+    palette_hint: bool = True
 
     def validate(self) -> None:
         if not 4 <= self.population <= 1000:
