@@ -79,6 +79,13 @@ def test_optimize_with_metric_judge_writes_a_run(tmp_path):
     assert "Best transfer functions" in proc.stdout
     assert (run / "report.html").exists() and (run / "best" / "rank01.vp").exists()
     assert _generations(run) == [0, 1, 2, 3]
+    # The colours named in --text ("red bone, faint blue skin") are the explorer's palette.
+    palette = json.loads((run / "checkpoint.json").read_text())["explorer"]["palette"]
+    assert len(palette) == 2 and palette[0][0] > 0.8 and palette[1][2] > 0.8
+    plain = tmp_path / "plain"
+    _intuitf("optimize", "phantom", *COMMON, "--generations", "1", "--no-palette", "-o", str(plain))
+    assert json.loads((plain / "run.json").read_text())["settings"]["palette_hint"] is False
+    assert json.loads((plain / "checkpoint.json").read_text())["explorer"]["palette"] == []
     # A second optimize into the same folder is refused with advice, not a traceback.
     again = _intuitf("optimize", "phantom", *COMMON, "-o", str(run), check=False)
     assert again.returncode == 2 and "--resume" in again.stderr and "Traceback" not in again.stderr

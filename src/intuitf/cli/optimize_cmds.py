@@ -196,6 +196,12 @@ def register(app: typer.Typer) -> None:
         ),
         top: int = typer.Option(4, "--top", help="How many best TFs to keep."),
         shading: bool = typer.Option(True, "--shading/--no-shading"),
+        palette: bool = typer.Option(
+            True,
+            "--palette/--no-palette",
+            help="Draw part of the new colours from those the intent asks for (the reference "
+            "picture's, the sketch's, or the colours named in --text).",
+        ),
         azimuth: float = typer.Option(None, "--azimuth"),
         elevation: float = typer.Option(None, "--elevation"),
         refine: Path = typer.Option(
@@ -244,6 +250,7 @@ def register(app: typer.Typer) -> None:
                 population=population, generations=generations, n_gaussians=gaussians, seed=seed,
                 explorer=explorer, protocol=protocol, image_size=size, output_size=output_size,
                 top_k=top, shading=shading, camera=_camera_dict(azimuth, elevation),
+                palette_hint=palette,
             )  # fmt: skip
             record = {
                 "volume_source": volume,
