@@ -26,6 +26,32 @@ _DISTINCT = 0.08
 _VALUE = 0.95
 
 
+def _dominant(
+    colours: np.ndarray, weights: np.ndarray | None, k: int, seed: int
+) -> list[tuple[np.ndarray, float]]:
+    """k-means over ``colours`` (N x 3, sampled by ``weights``): (centre, share), largest first.
+
+    Clusters under ``_MIN_SHARE`` are dropped, and a centre within ``_DISTINCT`` of a larger
+    one is merged into it.
+    """
+    rng = np.random.default_rng(seed)
+    p = None if weights is None else weights / weights.sum()
+    sample = colours[rng.choice(len(colours), size=min(4000, len(colours)), p=p)]
+    k = max(1, min(int(k), len(np.unique(np.round(sample, 2), axis=0))))
+    centres, labels = kmeans2(sample.astype(np.float64), k, seed=seed, minit="++")
+    shares = np.bincount(labels, minlength=k) / len(labels)
+    out: list[tuple[np.ndarray, float]] = []
+    for i in np.argsort(-shares, kind="stable"):
+        centre = np.clip(centres[i], 0.0, 1.0)
+        if shares[i] >= _MIN_SHARE and all(np.abs(centre - c).max() > _DISTINCT for c, _ in out):
+            out.append((centre, float(shares[i])))
+    return out
+
+
+def _rgb(c: np.ndarray) -> RGB:
+    return (float(c[0]), float(c[1]), float(c[2]))
+
+
 def palette_from_image(
     image: np.ndarray,
     k: int = 6,
@@ -55,54 +81,29 @@ def palette_from_image(
         return []
     value = np.maximum(rgb.max(axis=1), 1e-6)
     chroma = np.clip(rgb / value[:, None], 0.0, 1.0)
-    rng = np.random.default_rng(seed)
-    weights = value / value.sum()
-    sample = chroma[rng.choice(len(chroma), size=min(4000, len(chroma)), p=weights)]
-    k = max(1, min(int(k), len(np.unique(np.round(sample, 2), axis=0))))
-    centres, labels = kmeans2(sample.astype(np.float64), k, seed=seed, minit="++")
-    shares = np.bincount(labels, minlength=k) / len(labels)
-    palette: list[RGB] = []
-    for i in np.argsort(-shares, kind="stable"):
-        if shares[i] < _MIN_SHARE:
-            continue
-        colour = tuple(float(c) * _VALUE for c in np.clip(centres[i], 0.0, 1.0))
-        if all(
-            max(abs(a - b) for a, b in zip(colour, p, strict=True)) > _DISTINCT for p in palette
-        ):
-            palette.append(colour)  # type: ignore[arg-type]
-    return palette
+    return [_rgb(c * _VALUE) for c, _ in _dominant(chroma, value, k, seed)]
 
 
 def palette_from_sketch(sketch: np.ndarray, k: int = 6, seed: int = 0) -> list[RGB]:
-    """The colours of a sketch's strokes (RGBA, alpha > 0 where drawn), most used first."""
+    """The colours of a sketch's strokes (RGBA, alpha > 0 where drawn), most used first.
+
+    A stroke's colour is meant literally (no opacity blending), so colours are clustered as
+    drawn; every stroke pixel counts, however dark, since transparency marks what was not.
+    """
     sk = np.asarray(sketch)
     if sk.ndim != 3 or sk.shape[2] != 4:
         return []
-    # Every stroke pixel counts, however dark: transparency marks what was not drawn.
     drawn = sk[..., 3] > 0
     if drawn.sum() < 16:
         return []
     pix = sk[..., :3][drawn].astype(np.float32)
     pix = pix / 255.0 if sk.dtype == np.uint8 else pix
-    # A stroke's colour is meant literally (no opacity blending): cluster the colours as drawn.
-    k = max(1, min(int(k), len(np.unique(np.round(pix, 2), axis=0))))
-    rng = np.random.default_rng(seed)
-    sample = pix[rng.choice(len(pix), size=min(4000, len(pix)))]
-    centres, labels = kmeans2(sample.astype(np.float64), k, seed=seed, minit="++")
-    shares = np.bincount(labels, minlength=k) / len(labels)
-    out: list[RGB] = []
-    for i in np.argsort(-shares, kind="stable"):
-        colour = tuple(float(c) for c in np.clip(centres[i], 0.0, 1.0))
-        if shares[i] >= _MIN_SHARE and all(
-            max(abs(a - b) for a, b in zip(colour, p, strict=True)) > _DISTINCT for p in out
-        ):
-            out.append(colour)  # type: ignore[arg-type]
-    return out
+    return [_rgb(c) for c, _ in _dominant(pix, None, k, seed)]
 
 
 def palette_from_text(text: str) -> list[RGB]:
     """The colours named in ``text`` ("ivory bone, faint red skin": ivory, red), in order."""
-    return [tuple(c / 255.0 for c in NAMED_COLOURS[name]) for name in named_colours(text or "")]  # type: ignore[misc]
+    return [_rgb(np.asarray(NAMED_COLOURS[name]) / 255.0) for name in named_colours(text or "")]
 
 
 def intent_palette(intent: Intent, background: RGB = (0.0, 0.0, 0.0)) -> list[RGB]:
