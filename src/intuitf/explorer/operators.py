@@ -12,6 +12,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 
 from intuitf.explorer.bounds import Bounds, hsl_to_rgb, rgb_to_hsl
 from intuitf.tf.gaussian import Gaussian, GaussianTF
@@ -198,8 +199,6 @@ def _pairs(
     """
     if not by_mean or not ia or not ib:
         return list(zip(ia, ib, strict=False))
-    from scipy.optimize import linear_sum_assignment
-
     cost = np.abs(np.subtract.outer([ga[i].mean for i in ia], [gb[j].mean for j in ib]))
     rows, cols = linear_sum_assignment(cost)
     return [(ia[r], ib[c]) for r, c in zip(rows, cols, strict=True)]

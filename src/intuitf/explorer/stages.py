@@ -47,9 +47,9 @@ class StagePreset:
     "uniform" (uniform within the hard bounds, as the authors did). When the explorer has a
     palette (colours the intent asks for), ``palette_share`` of new colours are drawn from it
     and a mutation recolours a Gaussian from it with ``recolor_prob``. ``local_share`` of the
-    children that are not elites are local steps from the elites (one attribute of one
-    Gaussian changed, :func:`~intuitf.explorer.operators.mutate_one`); the rest are bred by
-    roulette selection, crossover and mutation. ``pair_by_mean``: crossover pairs each
+    places that are not elites go to mutated copies of the top of the ranking (see
+    :class:`~intuitf.explorer.ga.Explorer`); the rest are bred by roulette selection,
+    crossover and mutation. ``pair_by_mean``: crossover pairs each
     Gaussian with the other parent's nearest one (else k-th lowest with k-th lowest).
     """
 
@@ -150,11 +150,15 @@ class StagePreset:
         return cls(**kw)
 
 
-#: Initialization: quality aspects only, broad search with high rates that decay.
+#: Initialization: quality aspects only, broad search with high rates that decay; two thirds
+#: of the first population on the histogram's materials.
 INITIALIZE = StagePreset(name="initialize", aspects="quality", toggle_prob=0.06)
 
-#: Customization: intent aspects; rates raised again (the schedule restarts), but positions
-#: barely move so the structures found in initialization are kept. Colours are not reset.
+#: Customization: intent aspects; rates raised again from where initialization left them
+#: (the schedule restarts), but positions barely move so the structures found are kept, and
+#: half the places go to mutated copies of the best. Colours are not reset; palette colours
+#: are tried more often. (Rates, crossover and local share tuned on the recovery benchmark's
+#: engine task with 16 seeds of an in-process judge; see the project notes.)
 CUSTOMIZE = StagePreset(
     name="customize",
     aspects="intent",
