@@ -369,13 +369,13 @@ class FakeMLLMServer:
         )
 
     def _decide(self, first: np.ndarray, second: np.ndarray, u_bias: float, u_noise: float) -> str:
-        if u_bias < self.position_bias:
-            choice = "first"
-        else:
-            s1, s2 = self.score(first), self.score(second)
-            choice = "first" if s1 > s2 else "second" if s2 > s1 else "cannot decide"
-            if choice != "cannot decide" and u_noise < self.noise:
-                choice = "second" if choice == "first" else "first"
+        choice = oracle_choice(
+            lambda: (self.score(first), self.score(second)),
+            u_bias,
+            u_noise,
+            position_bias=self.position_bias,
+            noise=self.noise,
+        )
         with self._lock:
             if choice == "first":
                 self.stats.first_preferred += 1
@@ -384,6 +384,30 @@ class FakeMLLMServer:
             else:
                 self.stats.undecided += 1
         return choice
+
+
+def oracle_choice(
+    scores: Callable[[], tuple[float, float]],
+    u_bias: float,
+    u_noise: float,
+    *,
+    position_bias: float,
+    noise: float,
+) -> str:
+    """How the fake model answers: "first", "second" or "cannot decide".
+
+    With probability ``position_bias`` (``u_bias`` below it) it prefers the first image
+    without looking; otherwise the higher of ``scores()`` wins (equal: cannot decide), and
+    with probability ``noise`` that answer is flipped. ``u_bias`` and ``u_noise`` are uniform
+    draws in [0, 1) supplied by the caller, so the caller owns the randomness.
+    """
+    if u_bias < position_bias:
+        return "first"
+    s1, s2 = scores()
+    choice = "first" if s1 > s2 else "second" if s2 > s1 else "cannot decide"
+    if choice != "cannot decide" and u_noise < noise:
+        choice = "second" if choice == "first" else "first"
+    return choice
 
 
 def _error(message: str, kind: str) -> dict:
