@@ -158,7 +158,7 @@ INITIALIZE = StagePreset(name="initialize", aspects="quality", toggle_prob=0.06)
 #: (the schedule restarts), but positions barely move so the structures found are kept, and
 #: half the places go to mutated copies of the best. Colours are not reset; palette colours
 #: are tried more often. (Rates, crossover and local share tuned on the recovery benchmark's
-#: engine task with 16 seeds of an in-process judge; see the project notes.)
+#: engine task: benchmarks/recovery_ablation.py.)
 CUSTOMIZE = StagePreset(
     name="customize",
     aspects="intent",
