@@ -61,7 +61,10 @@ def test_no_histogram_means_no_seeds_and_paper_ga_has_none():
 def test_every_method_obeys_the_interface(method, target_tf):
     lut = target_tf.lut(64)
     bounds = Bounds(width=(0.01, 0.06))
-    ex = make_explorer(method, population=10, n_gaussians=3, generations=4, seed=2, bounds=bounds)
+    palette = [(0.95, 0.55, 0.15), (0.35, 0.6, 0.95)]
+    ex = make_explorer(
+        method, population=10, n_gaussians=3, generations=4, seed=2, bounds=bounds, palette=palette
+    )
     ids_seen: set[str] = set()
     for _ in range(4):
         cands = ex.ask()
@@ -76,7 +79,7 @@ def test_every_method_obeys_the_interface(method, target_tf):
         assert ex.best.id == ranking[0] and ex.history[-1] == ranking[0]
     # JSON round trip continues identically.
     clone = explorer_from_state(json.loads(json.dumps(ex.state_dict())))
-    assert type(clone) is type(ex)
+    assert type(clone) is type(ex) and clone.palette == ex.palette == tuple(palette)
     for _ in range(2):
         assert [c.to_dict() for c in clone.ask()] == [c.to_dict() for c in ex.ask()]
         ranking = rank_by_target(ex.ask(), lut)

@@ -50,6 +50,7 @@ class CMAExplorer(BaseExplorer):
         initial: Sequence[GaussianTF] = (),
         bounds: Bounds | None = None,
         presets: Mapping[str, StagePreset] | None = None,
+        palette: Sequence[Sequence[float]] = (),
         sigma0: float = 0.2,
         stage_sigma: float = 0.15,
     ) -> None:
@@ -66,6 +67,7 @@ class CMAExplorer(BaseExplorer):
             "initial": [tf.to_dict() for tf in initial],
             "bounds": bounds.to_dict() if bounds else None,
             "presets": {k: p.to_dict() for k, p in presets.items()} if presets else None,
+            "palette": [list(c) for c in palette],
             "sigma0": self.sigma0,
             "stage_sigma": self.stage_sigma,
         }
@@ -82,6 +84,7 @@ class CMAExplorer(BaseExplorer):
             initial=initial,
             bounds=bounds,
             presets=presets,
+            palette=palette,
         )
 
     # -- the strategy ----------------------------------------------------------------------
@@ -210,6 +213,7 @@ class CMAExplorer(BaseExplorer):
             presets={k: StagePreset.from_dict(v) for k, v in a["presets"].items()}
             if a["presets"]
             else None,
+            palette=a.get("palette", ()),
             sigma0=a["sigma0"],
             stage_sigma=a["stage_sigma"],
         )
