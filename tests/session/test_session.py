@@ -193,3 +193,13 @@ def test_verdicts_of_the_stage_carry_over_and_reset_with_the_stage(vol, tmp_path
     s.step()  # the next tournament fits them with its own verdicts: the list grows
     assert len(s.stage_games) > len(ckpt["stage_games"])
     s.close()
+
+
+@pytest.mark.parametrize("method", ["ga", "paper-ga", "cmaes", "random"])
+def test_every_explorer_method_runs_a_session_with_an_intent(vol, method):
+    settings = RunSettings(**{**SETTINGS, "generations": 2, "explorer": method})
+    s = Session.create(vol, intent=_intent(), settings=settings)
+    out = s.run(write_outputs=False)
+    assert out.completed and out.generations_done == 2
+    # The colours named in the text reach every method as its palette.
+    assert len(s.explorer.palette) == 2
