@@ -188,19 +188,25 @@ def bradley_terry(
     weights = np.broadcast_to(np.asarray(anchor_weight, dtype=np.float64), (n,))
     anchors = np.asarray(anchors, dtype=np.float64)
     wins = 0.5 * weights.copy()
-    pair_games = np.zeros((n, n))
-    for i, j, s in games:
-        wins[i] += s
-        wins[j] += 1.0 - s
-        pair_games[i, j] += 1.0
-        pair_games[j, i] += 1.0
+    # Games counted per unordered pair, so an iteration costs O(pairs), not O(n²): a stage's
+    # history can hold hundreds of players, most of whom met only a few others.
+    if games:
+        g = np.asarray(games, dtype=np.float64).reshape(-1, 3)
+        i, j, score = g[:, 0].astype(np.int64), g[:, 1].astype(np.int64), g[:, 2]
+        wins += np.bincount(i, score, n) + np.bincount(j, 1.0 - score, n)
+        keys, counts = np.unique(np.minimum(i, j) * n + np.maximum(i, j), return_counts=True)
+        pi, pj, counts = keys // n, keys % n, counts.astype(np.float64)
+    else:
+        pi = pj = np.zeros(0, dtype=np.int64)
+        counts = np.zeros(0)
     centre = float(np.mean(anchors)) if n else 0.0
     # Strengths relative to the mean anchor stay near 1 (no overflow of 10 ** (r / 400)).
     anchor_strength = 10.0 ** ((anchors - centre) / 400.0)
     gamma = anchor_strength.copy()
     for _ in range(iterations):
-        denom = (pair_games / (gamma[:, None] + gamma[None, :])).sum(axis=1)
-        denom += weights / (gamma + anchor_strength)
+        per_pair = counts / (gamma[pi] + gamma[pj])
+        denom = weights / (gamma + anchor_strength)
+        denom = denom + np.bincount(pi, per_pair, n) + np.bincount(pj, per_pair, n)
         new = wins / denom  # wins >= half a virtual point, so new > 0
         converged = np.max(np.abs(np.log(new) - np.log(gamma)), initial=0.0) < tol
         gamma = new

@@ -95,13 +95,6 @@ def _palette_hint(intent: Intent, settings: RunSettings) -> list[tuple[float, fl
     return intent_palette(intent, background=tuple(settings.background))
 
 
-def _games_touching(
-    games: Sequence[tuple[str, str, float]], ids: set[str]
-) -> list[tuple[str, str, float]]:
-    """The verdicts with at least one player among ``ids`` (the rest no longer matter)."""
-    return [g for g in games if g[0] in ids or g[1] in ids]
-
-
 def _aspects_for_stage(stage_aspects: str, intent: Intent) -> list[Aspect]:
     from intuitf.evaluator.aspects import aspects_for, aspects_for_intent
 
