@@ -234,6 +234,14 @@ def test_near_duplicate_tolerance():
     nudged = tf.with_gaussians([tf.gaussians[0], replace(g, mean=g.mean + 5e-4), tf.gaussians[2]])
     moved = tf.with_gaussians([tf.gaussians[0], replace(g, mean=g.mean + 0.01), tf.gaussians[2]])
     assert near_duplicate(tf, nudged) and not near_duplicate(tf, moved)
+    # A hidden feature's colour and position do not show: only visible Gaussians count.
+    hidden = replace(g, height=0.0)
+    a = tf.with_gaussians([tf.gaussians[0], hidden, tf.gaussians[2]])
+    b = tf.with_gaussians(
+        [tf.gaussians[0], replace(hidden, mean=0.9, color=(0.0, 1.0, 0.0)), tf.gaussians[2]]
+    )
+    assert near_duplicate(a, b) and not near_duplicate(a, tf)
+    assert not near_duplicate(a, a.with_gaussians(list(a.gaussians)[:2]))  # one shown less
 
 
 def test_stage_preset_serialises():

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
+import numpy as np
 import pytest
 
 from intuitf.errors import BudgetExhausted
@@ -203,3 +205,26 @@ def test_every_explorer_method_runs_a_session_with_an_intent(vol, method):
     assert out.completed and out.generations_done == 2
     # The colours named in the text reach every method as its palette.
     assert len(s.explorer.palette) == 2
+
+
+def test_best_results_are_different_pictures(vol):
+    s = Session.create(vol, intent=_intent(), settings=RunSettings(**SETTINGS))
+    s.run(write_outputs=False)
+    # Make the runner-up a twin of the winner that differs only in a hidden feature.
+    top, second = s.last_ranking[:2]
+    tf = s.tfs[top]
+    gs = list(tf.gaussians)
+    gs[0] = replace(gs[0], height=0.0)
+    twin = tf.with_gaussians(gs)
+    gs[0] = replace(gs[0], color=(0.0, 1.0, 0.0), mean=0.05)
+    s.tfs[top], s.tfs[second] = twin, tf.with_gaussians(gs)
+    s._images.pop(top, None), s._images.pop(second, None)
+    plain = s.best(4, distinct=False)
+    assert [t for t, _ in plain] == [s.tfs[c] for c in s.last_ranking[:4]]
+    best = s.best(4)
+    assert len(best) == 4 and best[0][0] == twin and s.tfs[second] not in [t for t, _ in best]
+    pictures = [s.render(t, size=64).astype(float) for t, _ in best]
+    for i in range(4):
+        for j in range(i):
+            assert np.abs(pictures[i] - pictures[j]).mean() >= 1.0
+    s.close()

@@ -96,15 +96,23 @@ def params(tf: GaussianTF) -> np.ndarray:
     return np.asarray(rows, dtype=np.float64)
 
 
-def near_duplicate(a: GaussianTF, b: GaussianTF, tol: float = 2e-3) -> bool:
-    """Whether ``a`` and ``b`` have the same Gaussians up to order and ``tol``.
+#: A Gaussian this low (opacity per voxel) shows nowhere: its other attributes do not matter.
+HIDDEN_HEIGHT = 1e-4
 
-    Means, widths and colour channels must agree within ``tol``; heights within ``tol``
-    relative to the larger of the two (a 0.2 % change in opacity does not show), or 1e-4.
+
+def near_duplicate(a: GaussianTF, b: GaussianTF, tol: float = 2e-3) -> bool:
+    """Whether ``a`` and ``b`` have the same visible Gaussians up to order and ``tol``.
+
+    Gaussians of height at most :data:`HIDDEN_HEIGHT` are left out (a hidden feature's
+    position or colour does not change the picture, so two TFs that differ only there would
+    be rendered and judged twice for nothing). Means, widths and colour channels must agree
+    within ``tol``; heights within ``tol`` relative to the larger of the two (a 0.2 % change
+    in opacity does not show), or 1e-4.
     """
-    if len(a) != len(b):
-        return False
     pa, pb = params(a), params(b)
+    pa, pb = pa[pa[:, 2] > HIDDEN_HEIGHT], pb[pb[:, 2] > HIDDEN_HEIGHT]
+    if len(pa) != len(pb):
+        return False
     d = np.abs(pa - pb)
     h_tol = np.maximum(tol * np.maximum(pa[:, 2], pb[:, 2]), 1e-4)
     return bool((d[:, [0, 1, 3, 4, 5]] <= tol).all() and (d[:, 2] <= h_tol).all())

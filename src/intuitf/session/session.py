@@ -80,6 +80,10 @@ class RunOutcome:
         return self.reason == "completed"
 
 
+#: Mean absolute difference (0-255 scale) under which two renderings count as the same picture.
+_SAME_PICTURE = 1.0
+
+
 def _generation_seed(seed: int, generation: int) -> int:
     """A per-generation seed for the tournament: independent of anything but the run seed."""
     h = hashlib.sha256(f"{seed}:{generation}".encode()).digest()
@@ -378,13 +382,27 @@ class Session:
             self._renderers[(size, shading)] = r
         return r.render(tf, camera or self.camera)
 
-    def best(self, k: int = 1) -> list[tuple[GaussianTF, float]]:
-        """The top ``k`` TFs of the last judged generation, with their ratings."""
-        out = []
-        for cid in self.last_ranking[:k]:
+    def best(self, k: int = 1, distinct: bool = True) -> list[tuple[GaussianTF, float]]:
+        """The top ``k`` TFs of the last judged generation, with their ratings.
+
+        With ``distinct`` (the default), a TF whose rendering looks the same as that of one
+        ranked above it (mean difference under 1/255, as when only a hidden feature differs)
+        is passed over for the next one: k results are k different pictures.
+        """
+        out: list[tuple[GaussianTF, float]] = []
+        shown: list[np.ndarray] = []
+        for cid in self.last_ranking:
+            if len(out) >= k:
+                break
             tf = self.tfs.get(cid)
-            if tf is not None:
-                out.append((tf, self.ratings.get(cid, float("nan"))))
+            if tf is None:
+                continue
+            if distinct:
+                img = self.image(cid, tf).astype(np.float32)
+                if any(np.abs(img - other).mean() < _SAME_PICTURE for other in shown):
+                    continue
+                shown.append(img)
+            out.append((tf, self.ratings.get(cid, float("nan"))))
         return out
 
     # -- the loop -------------------------------------------------------------------------
