@@ -430,7 +430,6 @@ class Session:
         }.get(self.stage, "quality")
         aspects = _aspects_for_stage(stage_aspects, self.intent)
         prior = {cid: self.ratings[cid] for cid in ids if cid in self.ratings}
-        history = list(self.stage_games)
         tournament = SwissTournament(
             self.judge,
             aspects,
@@ -444,7 +443,9 @@ class Session:
 
         try:
             result = self._run_async(
-                tournament.run(images, ids, prior=prior or None, progress=on_round, history=history)
+                tournament.run(
+                    images, ids, prior=prior or None, progress=on_round, history=self.stage_games
+                )
             )
         except (BudgetExhausted, JudgeError) as exc:
             partial = getattr(exc, "partial", None)
@@ -513,9 +514,9 @@ class Session:
         keep = set(ids)
         self._images = {k: v for k, v in self._images.items() if k in keep}
         self.tfs = {k: v for k, v in self.tfs.items() if k in keep}
-        self.stage_games = history + [
+        self.stage_games.extend(
             (m.first, m.second, float(m.verdict.p_first)) for m in result.matches
-        ]
+        )
 
         self.generation += 1
         if self.generation >= self._stage_end() and self.stage_index + 1 < len(self.plan):
