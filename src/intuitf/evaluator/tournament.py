@@ -62,6 +62,8 @@ from intuitf.evaluator.types import Aspect, Choice, Cost, Intent, Judge, Verdict
 
 Protocol = Literal["efficient", "paper"]
 ProgressFn = Callable[[int, int, int, Cost], None]
+#: Called with each judged match, in schedule order, as soon as its round is scored.
+MatchFn = Callable[["MatchRecord"], None]
 
 #: Beyond this many search steps the pairing gives up avoiding rematches (never reached in
 #: practice: with log2(n) + 2 rounds each player has met only a handful of the others).
@@ -264,6 +266,7 @@ class SwissTournament:
         prior: dict[str, float] | None = None,
         progress: ProgressFn | None = None,
         history: Sequence[tuple[str, str, float]] = (),
+        on_match: MatchFn | None = None,
     ) -> TournamentResult:
         """Play the tournament and return ratings and ranking.
 
@@ -286,6 +289,7 @@ class SwissTournament:
                 "A tournament got duplicate ids.", hint="Give every candidate a unique id."
             )
         state = _State(self, images, ids, prior, progress, history)
+        state.on_match = on_match
         return await state.play()
 
     def planned_rounds(self, n: int) -> int:
@@ -353,6 +357,7 @@ class _State:
         self.recheck_above = cfg.recheck_above if cfg.protocol == "efficient" else None
         #: Matches to re-ask in the other order: (index in matches, first, second).
         self.pending: list[tuple[int, int, int]] = []
+        self.on_match: MatchFn | None = None
         self.t0 = time.perf_counter()
 
     async def play(self) -> TournamentResult:
@@ -481,6 +486,8 @@ class _State:
             self.games.append((a, b, s))
             self.cost += out.cost
             self.matches.append(MatchRecord(rnd, self.ids[a], self.ids[b], out))
+            if self.on_match is not None:
+                self.on_match(self.matches[-1])
             if fit_before is not None and s in (0.0, 1.0):
                 # A surprise (the fit gave the loser a good chance) is the verdict most likely
                 # to be a judge error: ask it again in the other order next round.
