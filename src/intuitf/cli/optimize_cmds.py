@@ -14,6 +14,7 @@ from rich.table import Table
 
 from intuitf.cli import options as vo
 from intuitf.errors import IntuitfError, SessionError
+from intuitf.evaluator.factory import judge_record
 
 console = Console()
 
@@ -45,7 +46,15 @@ def _build_intent(text, image, sketch, on, about):
 
 
 def _make_judge(
-    spec: str, run_dir: Path, base_url, budget_usd, budget_calls, spent=None, protocol="efficient"
+    spec: str,
+    run_dir: Path,
+    base_url,
+    budget_usd,
+    budget_calls,
+    resumed=False,
+    protocol="efficient",
+    request_timeout=None,
+    answer_deadline=None,
 ):
     from intuitf.evaluator.budget import Budget
     from intuitf.evaluator.cache import VerdictCache
@@ -57,20 +66,24 @@ def _make_judge(
     options = {"swap": "never" if protocol == "efficient" else "always"}
     if base_url:
         options["base_url"] = base_url
+    if request_timeout is not None:
+        options["timeout"] = request_timeout
+    if answer_deadline is not None:
+        options["deadline"] = answer_deadline
     budget = None
     if budget_usd is not None or budget_calls is not None:
         budget = Budget(max_usd=budget_usd, max_calls=budget_calls)
-        if spent is not None:
-            # A resumed run's budget covers the whole run: count what was already paid.
-            budget.calls, budget.usd = spent.calls, spent.usd
     if spec == "metric":
         return make_judge(spec)
     created = not run_dir.exists()
     run_dir.mkdir(parents=True, exist_ok=True)
     try:
-        return make_judge(
-            spec, cache=VerdictCache(run_dir / "verdicts.sqlite"), budget=budget, **options
-        )
+        cache = VerdictCache(run_dir / "verdicts.sqlite")
+        if resumed and budget is not None:
+            # A resumed run's budget covers the whole run: what the store says was paid
+            # (exact, also for an interrupted generation and calls a killed process had out).
+            budget.restore(cache.spent(), *cache.unsettled())
+        return make_judge(spec, cache=cache, budget=budget, **options)
     except IntuitfError:
         # A bad spec or a missing API key must not leave an empty run folder behind.
         if created:
@@ -141,6 +154,7 @@ def _print_summary(outcome, session, started: float) -> None:
         f"{outcome.generations_done} generation(s), {c.calls} paid call(s), {c.cached_calls} from cache, "
         f"{c.input_tokens + c.output_tokens} tokens, ${c.usd:.4f}, {time.perf_counter() - started:.1f} s."
     )
+    _print_match_stats(outcome)
     if outcome.run_dir is not None:
         color = "green" if outcome.completed else "yellow"
         console.print(f"[{color}]{escape(outcome.message)}[/]")
@@ -149,6 +163,28 @@ def _print_summary(outcome, session, started: float) -> None:
         )
         if not outcome.completed:
             console.print(f"Continue with: intuitf optimize --resume {outcome.run_dir}")
+
+
+def _print_lock_note(session) -> None:
+    """Say so when this process took the run folder over from one that died holding it."""
+    lock = getattr(session, "lock", None) or getattr(session, "_lock", None)
+    note = getattr(lock, "takeover_message", None)
+    if note:
+        console.print(f"[yellow]note:[/] {escape(note)}")
+
+
+def _print_match_stats(outcome) -> None:
+    """Decided, undecided and re-asked matches of the whole run (from its journal)."""
+    if outcome.run_dir is None:
+        return
+    from intuitf.evaluator.tournament import MatchStats
+    from intuitf.session import RunDirectory
+
+    stats = MatchStats.from_journal(RunDirectory(outcome.run_dir).generations())
+    if stats.matches:
+        console.print(escape(stats.summary()) + ".")
+        if stats.warning:
+            console.print(f"[yellow]warning:[/] {escape(stats.warning)}")
 
 
 def register(app: typer.Typer) -> None:
@@ -169,7 +205,7 @@ def register(app: typer.Typer) -> None:
             None, "--about", help="What the volume is, e.g. 'a CT of a human foot'."
         ),
         evaluator: str = typer.Option(
-            "metric",
+            None,
             "--evaluator",
             help="metric | openai:MODEL | gemini:MODEL | ollama:MODEL | vllm:MODEL | lmstudio:MODEL | openrouter:MODEL | URL",
         ),
@@ -180,10 +216,22 @@ def register(app: typer.Typer) -> None:
         generations: int = typer.Option(12, "--generations"),
         gaussians: int = typer.Option(5, "--gaussians"),
         budget_usd: float = typer.Option(
-            None, "--budget-usd", help="Stop cleanly before spending more."
+            None, "--budget-usd", min=0.0, help="Stop cleanly before spending more."
         ),
         budget_calls: int = typer.Option(
-            None, "--budget-calls", help="Stop cleanly before more model calls."
+            None, "--budget-calls", min=0, help="Stop cleanly before more model calls."
+        ),
+        request_timeout: float = typer.Option(
+            None,
+            "--request-timeout",
+            min=0.001,
+            help="Seconds to wait for one model request (default 30, or [judge] in the config).",
+        ),
+        answer_deadline: float = typer.Option(
+            None,
+            "--answer-deadline",
+            min=0.001,
+            help="Seconds to get one answer, retries included (default 60, or the config).",
         ),
         seed: int = typer.Option(0, "--seed"),
         explorer: str = typer.Option("ga", "--explorer", help="ga | cmaes | random | paper-ga"),
@@ -233,9 +281,13 @@ def register(app: typer.Typer) -> None:
         """Find transfer functions that match what you want, unattended."""
 
         started = time.perf_counter()
+        timeouts = dict(request_timeout=request_timeout, answer_deadline=answer_deadline)
         if resume is not None:
-            session = _resume_session(resume, budget_usd, budget_calls, base_url)
+            session = _resume_session(
+                resume, budget_usd, budget_calls, base_url, evaluator, **timeouts
+            )
         else:
+            evaluator = evaluator or "metric"
             if volume is None:
                 raise IntuitfError("Give a VOLUME to optimize (or 'phantom'), or --resume RUN_DIR.")
             vol_args = dict(
@@ -255,19 +307,19 @@ def register(app: typer.Typer) -> None:
             record = {
                 "volume_source": volume,
                 "volume_args": vol_args,
-                "evaluator": evaluator,
-                "base_url": base_url,
+                **judge_record(evaluator, base_url),
             }
             if refine is not None:
                 session = _refine_session(
                     vol, refine, select, text, about, evaluator, base_url, run_dir, settings_kw,
-                    budget_usd, budget_calls, overwrite, record,
+                    budget_usd, budget_calls, overwrite, record, timeouts,
                 )  # fmt: skip
             else:
                 session = _new_session(
                     vol, intent, evaluator, base_url, run_dir, settings_kw, budget_usd,
-                    budget_calls, start_from or [], overwrite, record,
+                    budget_calls, start_from or [], overwrite, record, timeouts,
                 )  # fmt: skip
+        _print_lock_note(session)
         console.print(
             f"Optimizing [bold]{session.volume.name}[/] with {getattr(session.judge, 'name', 'judge')}: "
             f"population {session.settings.population}, {session.total_generations} generations "
@@ -354,13 +406,15 @@ def _new_session(
     start_from,
     overwrite,
     record,
+    timeouts=None,
 ):
     from intuitf.session import Session
     from intuitf.tf import load_tf
 
     settings, run_dir, judge = _prepare_run(
-        settings_kw, run_dir, overwrite, evaluator, base_url, budget_usd, budget_calls
-    )
+        settings_kw, run_dir, overwrite, evaluator, base_url, budget_usd, budget_calls,
+        **(timeouts or {}),
+    )  # fmt: skip
     initial = [load_tf(p) for p in start_from]
     return Session.create(
         vol,
@@ -374,7 +428,9 @@ def _new_session(
     )
 
 
-def _prepare_run(settings_kw, run_dir, overwrite, evaluator, base_url, budget_usd, budget_calls):
+def _prepare_run(
+    settings_kw, run_dir, overwrite, evaluator, base_url, budget_usd, budget_calls, **timeouts
+):
     """Validated settings, a run folder that holds no other run, and the judge for it."""
     from intuitf.session import RunSettings
 
@@ -387,14 +443,15 @@ def _prepare_run(settings_kw, run_dir, overwrite, evaluator, base_url, budget_us
             f"Continue it with --resume {run_dir}, or pick another folder with -o (or --overwrite).",
         )
     judge = _make_judge(
-        evaluator, run_dir, base_url, budget_usd, budget_calls, protocol=settings.protocol
-    )
+        evaluator, run_dir, base_url, budget_usd, budget_calls, protocol=settings.protocol,
+        **timeouts,
+    )  # fmt: skip
     return settings, run_dir, judge
 
 
 def _refine_session(
     vol, tf_path, select, text, about, evaluator, base_url, run_dir, settings_kw,
-    budget_usd, budget_calls, overwrite, record,
+    budget_usd, budget_calls, overwrite, record, timeouts=None,
 ):  # fmt: skip
     from intuitf.session import Session
     from intuitf.tf import load_tf
@@ -414,34 +471,46 @@ def _refine_session(
             f"--select must name Gaussians 1..{len(tf)} of {tf_path}; got {select!r}."
         )
     settings, run_dir, judge = _prepare_run(
-        settings_kw, run_dir, overwrite, evaluator, base_url, budget_usd, budget_calls
-    )
+        settings_kw, run_dir, overwrite, evaluator, base_url, budget_usd, budget_calls,
+        **(timeouts or {}),
+    )  # fmt: skip
     return Session.refine(
         vol, tf, picked, text, judge=judge, settings=settings, run_dir=run_dir, about=about,
         overwrite=overwrite, extra_record=record,
     )  # fmt: skip
 
 
-def _resume_session(run_dir: Path, budget_usd, budget_calls, base_url):
+def _resume_session(run_dir: Path, budget_usd, budget_calls, base_url, evaluator=None, **timeouts):
+    from intuitf.evaluator.factory import record_judge_move, resume_judge_spec
     from intuitf.session import RunDirectory, Session
 
     rd = RunDirectory(run_dir)
     record = rd.read_run()
     vol = vo.open_volume(record.get("volume_source", "phantom"), **record.get("volume_args", {}))
-    ckpt = rd.read_checkpoint() or {}
-    from intuitf.evaluator.types import Cost
-
-    spent = Cost(**ckpt.get("cost", {})) if ckpt else None
+    # --evaluator / --base-url on a resume move the run to another model or server.
+    spec, url, moved = resume_judge_spec(record, evaluator, base_url)
     judge = _make_judge(
-        record.get("evaluator", "metric"),
+        spec,
         rd.root,
-        base_url or record.get("base_url"),
+        url,
         budget_usd,
         budget_calls,
-        spent,
+        resumed=True,
         protocol=record.get("settings", {}).get("protocol", "efficient"),
+        **timeouts,
     )
     session = Session.resume(rd.root, vol, judge)
+    _print_lock_note(session)
+    if moved:
+        record = rd.read_run()  # as the resume left it
+        entry = record_judge_move(record, spec, url, session.generation)
+        rd.write_run(record)
+        rd.append_journal({"type": "judge", **entry})
+        console.print(
+            f"Moving this run to [bold]{escape(entry['evaluator'])}[/]"
+            + (f" at {escape(entry['base_url'])}" if entry.get("base_url") else "")
+            + f" from generation {entry['from_generation'] + 1} on (recorded in run.json)."
+        )
     if session.done:
         console.print("[green]This run is already complete.[/] Rewriting its outputs.")
     return session

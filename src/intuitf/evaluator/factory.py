@@ -18,7 +18,7 @@ from typing import Any
 from intuitf.errors import JudgeError
 from intuitf.evaluator.budget import Budget
 from intuitf.evaluator.cache import VerdictCache
-from intuitf.evaluator.providers import PROVIDERS
+from intuitf.evaluator.providers import PROVIDERS, redact_url
 from intuitf.evaluator.types import Judge
 
 _SPEC_HINT = (
@@ -59,3 +59,75 @@ def make_judge(
     model = model or options.pop("model", None)
     options.pop("model", None)
     return MLLMJudge(model or None, provider=provider, cache=cache, budget=budget, **options)
+
+
+# -- the judge of a run, as recorded in its run.json --------------------------------------------
+
+
+def _is_url(spec: str | None) -> bool:
+    return bool(spec) and str(spec).startswith(("http://", "https://"))
+
+
+def judge_record(spec: str, base_url: str | None, generation: int = 0) -> dict:
+    """What run.json keeps about a run's judge: spec and URL with credentials redacted, and the
+    list of judges used (each with the generation it started at)."""
+    entry = {
+        "evaluator": redact_url(spec),
+        "base_url": redact_url(base_url),
+        "from_generation": int(generation),
+    }
+    return {"evaluator": entry["evaluator"], "base_url": entry["base_url"], "judges": [entry]}
+
+
+def resume_judge_spec(
+    record: dict, evaluator: str | None = None, base_url: str | None = None
+) -> tuple[str, str | None, bool]:
+    """The judge spec and base URL to resume a run with, and whether the run moves.
+
+    ``record`` is the run's run.json. A new ``evaluator`` replaces the recorded one; a new
+    ``base_url`` replaces the server address, also when the recorded evaluator is a URL (its
+    ``#MODEL`` is kept). A recorded address whose credentials were redacted must be given again.
+    """
+    old_spec = str(record.get("evaluator") or "metric")
+    old_url = record.get("base_url") or None
+    spec = evaluator.strip() if evaluator and evaluator.strip() else old_spec
+    if evaluator and base_url is None:
+        # The recorded server address goes with the recorded provider only.
+        same_provider = spec.partition(":")[0] == old_spec.partition(":")[0] and not _is_url(spec)
+        url = old_url if same_provider else None
+    else:
+        url = base_url or old_url
+    if base_url and _is_url(spec):
+        _, _, model = spec.partition("#")
+        spec = base_url.strip() + (f"#{model}" if model else "")
+        url = None
+    for value in (spec, url):
+        if value and "***" in value and redact_url(value) == value:
+            raise JudgeError(
+                "This run's model server address held credentials, which intuitf does not store.",
+                "Give the address again when resuming: intuitf optimize --resume RUN "
+                "--base-url http://USER:KEY@HOST/v1 (or put the key in INTUITF_API_KEY).",
+            )
+    moved = (redact_url(spec), redact_url(url)) != (redact_url(old_spec), redact_url(old_url))
+    if spec == "metric":
+        url = None
+    return spec, url, moved
+
+
+def record_judge_move(record: dict, spec: str, base_url: str | None, generation: int) -> dict:
+    """Note in ``record`` (run.json's dict, changed in place) that the run now uses this judge
+    from ``generation`` on; returns the new history entry."""
+    history = list(record.get("judges") or [])
+    if not history:  # a run recorded before the history existed: its first judge from gen 0
+        history.append(
+            {
+                "evaluator": redact_url(record.get("evaluator") or "metric"),
+                "base_url": redact_url(record.get("base_url")),
+                "from_generation": 0,
+            }
+        )
+    new = judge_record(spec, base_url, generation)
+    entry = new["judges"][0]
+    history.append(entry)
+    record.update(evaluator=new["evaluator"], base_url=new["base_url"], judges=history)
+    return entry

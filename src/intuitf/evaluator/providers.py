@@ -15,6 +15,7 @@ Keys are never logged, printed, stored or put in error messages.
 from __future__ import annotations
 
 import os
+import re
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -97,6 +98,39 @@ class Secret:
 
     def __reduce__(self):  # never pickled along with a judge
         raise TypeError("a Secret cannot be pickled")
+
+
+#: ``scheme://userinfo@`` anywhere in a text: the userinfo (user, password or key) is secret.
+_URL_USERINFO = re.compile(r"(?P<scheme>[A-Za-z][A-Za-z0-9+.\-]*://)(?P<userinfo>[^/@\s?#]+)@")
+#: Query parameters that carry credentials (``?key=...`` is Gemini's style).
+_SECRET_QUERY = re.compile(
+    r"(?P<name>[?&](?:api[_-]?key|key|token|access[_-]?token|password|secret)=)[^&#\s]+",
+    re.IGNORECASE,
+)
+
+
+def redact_url(text: str | None) -> str | None:
+    """``text`` with credentials in any URL it contains replaced by ``***``.
+
+    ``http://user:KEY@host/v1`` becomes ``http://user:***@host/v1``, ``http://KEY@host`` becomes
+    ``http://***@host``, and ``?key=...``-style query parameters lose their values. Works on a bare
+    URL, a judge spec (``URL#model``) or any message that quotes one. The one helper used
+    wherever a URL is stored (run.json, journal) or shown (errors, repr, logs).
+    """
+    if not text:
+        return text
+
+    def userinfo(m: re.Match) -> str:
+        user, sep, _ = m.group("userinfo").partition(":")
+        return f"{m.group('scheme')}{user}:***@" if sep else f"{m.group('scheme')}***@"
+
+    out = _URL_USERINFO.sub(userinfo, str(text))
+    return _SECRET_QUERY.sub(lambda m: f"{m.group('name')}***", out)
+
+
+def has_redacted_credentials(url: str | None) -> bool:
+    """Whether ``url`` went through :func:`redact_url` and lost a credential."""
+    return bool(url) and redact_url(url) == url and "***" in str(url)
 
 
 def preset(name: str) -> ProviderPreset:

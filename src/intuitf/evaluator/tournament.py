@@ -101,6 +101,87 @@ class MatchRecord:
         )
 
 
+#: Above this share of undecided matches, a run's summary and report warn.
+UNDECIDED_WARNING = 0.05
+
+
+@dataclass
+class MatchStats:
+    """How many matches were decided (a usable answer), undecided (none), or needed a re-ask."""
+
+    matches: int = 0
+    decided: int = 0
+    undecided: int = 0
+    retried: int = 0
+
+    @classmethod
+    def of(cls, matches: Sequence[MatchRecord]) -> MatchStats:
+        out = cls()
+        for m in matches:
+            out.matches += 1
+            if m.verdict.decided:
+                out.decided += 1
+            else:
+                out.undecided += 1
+            if m.verdict.retries > 0:
+                out.retried += 1
+        return out
+
+    @classmethod
+    def from_journal(cls, entries: Sequence[dict]) -> MatchStats:
+        """The totals over journal "generation" entries (counted from their matches if needed)."""
+        out = cls()
+        for e in entries:
+            if "undecided" in e and "decided" in e:
+                out += cls(
+                    int(e.get("decided", 0)) + int(e.get("undecided", 0)),
+                    int(e.get("decided", 0)),
+                    int(e.get("undecided", 0)),
+                    int(e.get("retried", 0)),
+                )
+            else:
+                ms = []
+                for m in e.get("matches", []) or []:
+                    try:
+                        ms.append(MatchRecord.from_dict(m))
+                    except (KeyError, TypeError, ValueError):
+                        continue
+                out += cls.of(ms)
+        return out
+
+    def __iadd__(self, other: MatchStats) -> MatchStats:
+        self.matches += other.matches
+        self.decided += other.decided
+        self.undecided += other.undecided
+        self.retried += other.retried
+        return self
+
+    @property
+    def undecided_share(self) -> float:
+        return self.undecided / self.matches if self.matches else 0.0
+
+    @property
+    def warning(self) -> str | None:
+        """A sentence for the user when too many matches stayed undecided, else None."""
+        if self.undecided_share <= UNDECIDED_WARNING:
+            return None
+        return (
+            f"{self.undecided} of {self.matches} matches ({100 * self.undecided_share:.0f} %) "
+            "stayed undecided: the model gave no usable answer even when asked again, so the "
+            "ranking rests on less evidence than it seems. Check the model and its server (the "
+            "journal's verdict errors say what it answered)."
+        )
+
+    def to_dict(self) -> dict:
+        return {"decided": self.decided, "undecided": self.undecided, "retried": self.retried}
+
+    def summary(self) -> str:
+        return (
+            f"{self.matches} match(es): {self.decided} decided, {self.undecided} undecided, "
+            f"{self.retried} asked again"
+        )
+
+
 @dataclass
 class TournamentResult:
     """Ratings, ranking (best first) and every judged match of one tournament.
@@ -120,6 +201,10 @@ class TournamentResult:
     byes: list[tuple[int, str]] = field(default_factory=list)
     protocol: str = "efficient"
     complete: bool = True
+
+    def match_stats(self) -> MatchStats:
+        """Decided, undecided and re-asked matches of this tournament."""
+        return MatchStats.of(self.matches)
 
     def fitness(
         self, progress: float, schedule: PressureSchedule | None = None
@@ -563,4 +648,5 @@ def _merge(a: Verdict, b: Verdict, aspects: Sequence[Aspect]) -> Verdict:
         rationale=rationale,
         cached=a.cached and b.cached,
         error="; ".join(errors) if len(errors) == 2 else None,
+        retries=a.retries + b.retries,
     )

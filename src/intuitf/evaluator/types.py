@@ -120,7 +120,9 @@ class Verdict:
 
     ``per_aspect`` maps aspect keys to choices; ``overall`` is their weighted preference;
     ``p_first`` is the probability the first image is better (1, 0.5 or 0 for a hard verdict).
-    ``error`` is set when the judge could not decide for a technical reason (logged tie).
+    ``error`` is set when the judge could not decide for a technical reason (logged tie): the
+    verdict is then *undecided* (it carries no information). ``retries`` counts the unusable
+    answers (unreadable, truncated, refused, "blind") that were asked again to reach it.
     """
 
     per_aspect: dict[str, Choice]
@@ -130,6 +132,12 @@ class Verdict:
     rationale: dict[str, str] = field(default_factory=dict)
     cached: bool = False
     error: str | None = None
+    retries: int = 0
+
+    @property
+    def decided(self) -> bool:
+        """Whether the verdict rests on at least one usable answer."""
+        return self.error is None
 
     def swapped(self) -> Verdict:
         """The verdict as if the two images had been given in the other order."""
@@ -141,6 +149,7 @@ class Verdict:
             rationale=dict(self.rationale),
             cached=self.cached,
             error=self.error,
+            retries=self.retries,
         )
 
     def to_dict(self) -> dict:
@@ -152,6 +161,7 @@ class Verdict:
             "rationale": self.rationale,
             "cached": self.cached,
             "error": self.error,
+            "retries": self.retries,
         }
 
     @classmethod
@@ -164,6 +174,7 @@ class Verdict:
             rationale=dict(d.get("rationale", {})),
             cached=bool(d.get("cached", False)),
             error=d.get("error"),
+            retries=int(d.get("retries", 0) or 0),
         )
 
 
