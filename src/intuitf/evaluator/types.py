@@ -56,6 +56,8 @@ class Intent:
       the rendering the strokes were drawn on; a stroke means "make this region this colour".
     - ``edit``: ``instruction`` applies to the features ``selected`` (Gaussian indices) of
       ``base``, the rendering before the edit; everything else should be preserved.
+      ``selection_mask`` (bool, the base's height x width) marks the pixels those features
+      cover in ``base``, so a judge can see where the change should happen.
     ``about`` says what the volume is ("a CT of a human foot"), for any kind.
     """
 
@@ -66,6 +68,7 @@ class Intent:
     base: np.ndarray | None = None
     selected: tuple[int, ...] = ()
     about: str | None = None
+    selection_mask: np.ndarray | None = None
 
     def fingerprint(self) -> str:
         """A stable hash of the intent's content (for verdict caching)."""
@@ -80,6 +83,10 @@ class Intent:
                 a = np.ascontiguousarray(arr)
                 h.update(f"{a.shape}{a.dtype}".encode())
                 h.update(a.tobytes())
+        if self.selection_mask is not None:  # absent: the same hash as before the field existed
+            m = np.ascontiguousarray(self.selection_mask, dtype=bool)
+            h.update(f"selection{m.shape}".encode())
+            h.update(np.packbits(m).tobytes())
         return h.hexdigest()
 
 

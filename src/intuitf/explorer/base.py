@@ -12,6 +12,7 @@ from intuitf.evaluator.fitness import rank_fitness
 from intuitf.explorer.bounds import Bounds
 from intuitf.explorer.candidate import Candidate, candidate_id
 from intuitf.explorer.genome import is_duplicate_of_any
+from intuitf.explorer.hints import Hint, as_hints, hinted_tf
 from intuitf.explorer.operators import MutationParams, mutate
 from intuitf.explorer.population import materials_of, random_tf, seeded_tf
 from intuitf.explorer.stages import STAGES, StagePreset
@@ -62,6 +63,11 @@ class BaseExplorer:
         palette: RGB colours (0..1) the intent asks for (see
             :func:`intuitf.evaluator.palette.intent_palette`); the stage presets say how
             often new colours come from it. Empty: colours come from the whole colour space.
+        hints: materials the intent names, each with where it sits, its colour and opacity
+            (:class:`~intuitf.explorer.hints.Hint` or its dict; see
+            :func:`intuitf.evaluator.hints.explorer_hints`). ``hint_share`` of a fresh
+            population is placed on them, and mutations draw a Gaussian's colour and height
+            from its material's hint now and then (``hint_prob``). Empty: no hints.
 
     Subclasses implement :meth:`_next_population` (and may extend state and stages).
     Generations are counted over the whole run; ``progress`` restarts at each stage.
@@ -83,6 +89,7 @@ class BaseExplorer:
         bounds: Bounds | None = None,
         presets: Mapping[str, StagePreset] | None = None,
         palette: Sequence[Sequence[float]] = (),
+        hints: Sequence[Hint | Mapping] = (),
     ) -> None:
         if int(population) < 2:
             raise ValueError(f"population must be at least 2, got {population}.")
@@ -95,6 +102,7 @@ class BaseExplorer:
         self.seed = int(seed)
         self.value_range = tuple(float(v) for v in value_range) if value_range else None
         self.palette = _palette(palette)
+        self.hints = as_hints(hints)
         initial = list(initial)[: self.population_size]
         self.bounds = (bounds or Bounds()).covering(initial)
         self.presets: dict[str, StagePreset] = dict(presets or STAGES)
@@ -282,6 +290,17 @@ class BaseExplorer:
             color=self._color,
         )
 
+    def _hinted(self) -> GaussianTF:
+        return hinted_tf(
+            self._rng,
+            self.hints,
+            self._materials,
+            self.n_gaussians,
+            self.bounds,
+            value_range=self.value_range,
+            color=self._color,
+        )
+
     def _seeded(self) -> GaussianTF:
         return seeded_tf(
             self._rng,
@@ -317,6 +336,12 @@ class BaseExplorer:
             before = len(pop)
             pop = self._fill_with_variants(pop, len(pop) + n_var, parents=made)
             made += pop[before:]
+        placed = any(h.center is not None for h in self.hints)
+        n_hint = round(self._preset.hint_share * (n - len(made))) if placed else 0
+        for _ in range(n_hint):
+            c = self._unique(self._hinted, "hint", pop)
+            pop.append(c)
+            made.append(c)
         n_seed = round(self._preset.seed_share * n) if self._materials else 0
         for _ in range(min(n_seed, n - len(made))):
             c = self._unique(self._seeded, "seed", pop)
@@ -338,7 +363,7 @@ class BaseExplorer:
         return self._new(tf, origin)
 
     def _variant_params(self) -> MutationParams:
-        return self._preset.mutation_params(0.0, self.palette)
+        return self._preset.mutation_params(0.0, self.palette, self.hints)
 
     def _fill_with_variants(
         self, pop: list[Candidate], size: int, parents: Sequence[Candidate] | None = None
@@ -399,6 +424,7 @@ class BaseExplorer:
             "best": self._best.to_dict() if self._best else None,
             "materials": [[m.center, m.spread, m.fraction] for m in self._materials],
             "palette": [list(c) for c in self.palette],
+            "hints": [h.to_dict() for h in self.hints],
             "rng": rng_state(self._rng),
         }
 
@@ -431,6 +457,7 @@ class BaseExplorer:
         self._best = Candidate.from_dict(state["best"]) if state.get("best") else None
         self._materials = [Material(*m) for m in state.get("materials", [])]
         self.palette = _palette(state.get("palette", ()))
+        self.hints = as_hints(state.get("hints", ()))
         self._rng = rng_from_state(state["rng"])
         self._restore_extra(state)
         return self

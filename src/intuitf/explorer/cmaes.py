@@ -22,6 +22,7 @@ from intuitf.explorer.base import STATE_FORMAT, STATE_VERSION, BaseExplorer
 from intuitf.explorer.bounds import Bounds
 from intuitf.explorer.candidate import Candidate
 from intuitf.explorer.genome import decode, encode
+from intuitf.explorer.hints import as_hints
 from intuitf.explorer.stages import StagePreset
 from intuitf.tf.gaussian import GaussianTF
 
@@ -51,6 +52,7 @@ class CMAExplorer(BaseExplorer):
         bounds: Bounds | None = None,
         presets: Mapping[str, StagePreset] | None = None,
         palette: Sequence[Sequence[float]] = (),
+        hints: Sequence = (),
         sigma0: float = 0.2,
         stage_sigma: float = 0.15,
     ) -> None:
@@ -68,6 +70,7 @@ class CMAExplorer(BaseExplorer):
             "bounds": bounds.to_dict() if bounds else None,
             "presets": {k: p.to_dict() for k, p in presets.items()} if presets else None,
             "palette": [list(c) for c in palette],
+            "hints": [h.to_dict() for h in as_hints(hints)],
             "sigma0": self.sigma0,
             "stage_sigma": self.stage_sigma,
         }
@@ -85,6 +88,7 @@ class CMAExplorer(BaseExplorer):
             bounds=bounds,
             presets=presets,
             palette=palette,
+            hints=hints,
         )
 
     # -- the strategy ----------------------------------------------------------------------
@@ -117,6 +121,8 @@ class CMAExplorer(BaseExplorer):
         # The first population: CMA-ES samples around the start point.
         if initial:
             template = initial[0]
+        elif any(h.center is not None for h in self.hints):
+            template = self._hinted()
         elif self._materials:
             template = self._seeded()
         else:
@@ -214,6 +220,7 @@ class CMAExplorer(BaseExplorer):
             if a["presets"]
             else None,
             palette=a.get("palette", ()),
+            hints=a.get("hints", ()),
             sigma0=a["sigma0"],
             stage_sigma=a["stage_sigma"],
         )

@@ -42,7 +42,7 @@ class Explorer(BaseExplorer):
         n = self.population_size
         n_elite = elite_count(preset.elite_share(progress), min(n, len(ranked)))
         nxt: list[Candidate] = list(ranked[:n_elite])
-        params = preset.mutation_params(progress, self.palette)
+        params = preset.mutation_params(progress, self.palette, self.hints)
         cx_rate = preset.crossover_rate.at(progress)
         # Mutated copies of the top of the ranking (best first, round robin). Near a good TF
         # most children of roulette-drawn parents are worse than the best; children of the

@@ -15,6 +15,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from intuitf.explorer.bounds import Bounds, hsl_to_rgb, rgb_to_hsl
+from intuitf.explorer.hints import Hint, hint_for, sample_hint_height
 from intuitf.tf.gaussian import Gaussian, GaussianTF
 
 #: Gaussian attributes crossover may exchange.
@@ -56,6 +57,11 @@ class MutationParams:
     #: replaced by one of them (slightly varied) instead of taking HSL steps.
     palette: tuple[tuple[float, float, float], ...] = ()
     recolor_prob: float = 0.0
+    #: Materials the intent names (:class:`~intuitf.explorer.hints.Hint`); with
+    #: ``hint_prob`` per Gaussian, a Gaussian on a hinted material takes that hint's colour
+    #: (slightly varied) and a height from its opacity band.
+    hints: tuple[Hint, ...] = ()
+    hint_prob: float = 0.0
 
     def forced(self) -> MutationParams:
         """Every attribute changes: used to push a near-duplicate away from its twin."""
@@ -102,13 +108,16 @@ def mutate(
 
     ``only`` restricts the mutation to those Gaussian indices (frozen ones still excluded).
     Colour mutation is, per individual, either a swap of two free Gaussians' colours (with
-    ``swap_prob``) or per-Gaussian HSL steps with occasional channel recombination.
+    ``swap_prob``) or per-Gaussian HSL steps with occasional channel recombination. With
+    hints, a Gaussian drawn (``hint_prob``) to follow the hint of the material it sits on
+    takes that hint's colour and a height from its band instead of those steps.
     """
     b = bounds
     gs = list(tf.gaussians)
     free = [i for i, g in enumerate(gs) if not g.frozen and (only is None or i in only)]
     if not free:
         return tf
+    hinted: dict[int, Hint] = {}
     for i in free:
         g = gs[i]
         mean, width, height = g.mean, g.width, g.height
@@ -137,6 +146,13 @@ def mutate(
                 height = max(b.height[0], 0.0)
             else:
                 height = float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
+        # No random number is spent without hints, so such runs stay as they were.
+        if p.hints and rng.random() < p.hint_prob:
+            hint = hint_for(mean, p.hints)
+            if hint is not None:
+                hinted[i] = hint
+                if hint.height is not None:
+                    height = sample_hint_height(rng, hint.height, b)
         gs[i] = replace(g, mean=mean, width=width, height=height)
     if len(free) >= 2 and rng.random() < p.swap_prob:
         i, j = (int(k) for k in rng.choice(free, size=2, replace=False))
@@ -144,6 +160,9 @@ def mutate(
     else:
         for i in free:
             gs[i] = replace(gs[i], color=_mutate_color(gs[i].color, rng, p, b))
+    for i, hint in hinted.items():
+        if hint.color is not None:
+            gs[i] = replace(gs[i], color=b.sample_palette_color(rng, [hint.color]))
     return tf.with_gaussians(gs)
 
 

@@ -49,7 +49,10 @@ class StagePreset:
     and a mutation recolours a Gaussian from it with ``recolor_prob``. ``local_share`` of the
     places that are not elites go to mutated copies of the top of the ranking (see
     :class:`~intuitf.explorer.ga.Explorer`); the rest are bred by roulette selection,
-    crossover and mutation. ``pair_by_mean``: crossover pairs each
+    crossover and mutation. With material hints (what the words say about single materials:
+    :mod:`intuitf.explorer.hints`), ``hint_share`` of a fresh population is placed on them
+    and a mutation makes a Gaussian follow its material's hint with ``hint_prob``.
+    ``pair_by_mean``: crossover pairs each
     Gaussian with the other parent's nearest one (else k-th lowest with k-th lowest).
     """
 
@@ -81,6 +84,8 @@ class StagePreset:
     recolor_prob: float = 0.1
     local_share: Decay = _const(0.25)
     pair_by_mean: bool = True
+    hint_share: float = 0.5
+    hint_prob: float = 0.1
 
     def __post_init__(self) -> None:
         if self.aspects not in ASPECT_SETS:
@@ -90,8 +95,11 @@ class StagePreset:
                 f"init_sampling must be 'log' or 'uniform', got {self.init_sampling!r}."
             )
 
-    def mutation_params(self, progress: float, palette: tuple = ()) -> MutationParams:
-        """Rates and steps at ``progress`` (0..1) through the stage (``palette``: see above)."""
+    def mutation_params(
+        self, progress: float, palette: tuple = (), hints: tuple = ()
+    ) -> MutationParams:
+        """Rates and steps at ``progress`` (0..1) through the stage (``palette`` and
+        ``hints``: see above)."""
         rate = self.mutation_rate.at(progress)
         return MutationParams(
             rate=rate,
@@ -108,6 +116,8 @@ class StagePreset:
             additive=self.additive_steps,
             palette=tuple(palette),
             recolor_prob=self.recolor_prob,
+            hints=tuple(hints),
+            hint_prob=self.hint_prob,
         )
 
     def elite_share(self, progress: float) -> float:
@@ -175,6 +185,7 @@ CUSTOMIZE = StagePreset(
     crossover_rate=Decay(0.6, 0.4),
     recolor_prob=0.15,
     local_share=_const(0.5),
+    hint_prob=0.15,
 )
 
 #: Refinement: only the selected Gaussians evolve (the rest are frozen); edit aspects.
@@ -194,6 +205,7 @@ REFINE = StagePreset(
     seed_share=0.0,
     freeze_unselected=True,
     local_share=_const(0.4),
+    hint_prob=0.3,
 )
 
 STAGES: dict[str, StagePreset] = {p.name: p for p in (INITIALIZE, CUSTOMIZE, REFINE)}
@@ -237,6 +249,8 @@ def paper_settings() -> dict[str, StagePreset]:
         recolor_prob=0.0,
         local_share=_const(0.0),
         pair_by_mean=False,
+        hint_share=0.0,
+        hint_prob=0.0,
     )
     customize = replace(
         base,

@@ -1,0 +1,170 @@
+"""Material hints: what the intent's words say about single materials, as the Explorer sees it.
+
+A hint says where a material sits in the (normalised) data range, what colour the user wants
+it in and how opaque (a band of Gaussian heights). The Explorer never sees text or images: the
+evaluator side turns words into hints (:mod:`intuitf.evaluator.hints`) the way it turns them
+into a palette. The Explorer places part of its first population on them and, now and then,
+draws a Gaussian's colour or height from the hint of the material it sits on. A hint without
+a ``center`` applies to every free Gaussian (an edit of selected features: "make it gold").
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from intuitf.explorer.bounds import Bounds
+from intuitf.tf.defaults import Material
+from intuitf.tf.gaussian import Gaussian, GaussianTF
+
+RGB = tuple[float, float, float]
+
+#: A Gaussian belongs to a hint when its mean is within this many of the hint's spreads...
+_REACH = 2.5
+#: ...or within this absolute distance (normalised units), whichever is larger.
+_MIN_REACH = 0.03
+
+
+@dataclass(frozen=True)
+class Hint:
+    """One material the intent names: where it is, its colour and its opacity band."""
+
+    name: str
+    center: float | None = None
+    spread: float = 0.03
+    color: RGB | None = None
+    height: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        if self.center is not None and not 0.0 <= float(self.center) <= 1.0:
+            raise ValueError(f"A hint's center must be within [0, 1], got {self.center!r}.")
+        if not float(self.spread) > 0:
+            raise ValueError(f"A hint's spread must be > 0, got {self.spread!r}.")
+        if self.color is not None:
+            c = tuple(float(v) for v in self.color)
+            if len(c) != 3 or not all(0.0 <= v <= 1.0 for v in c):
+                raise ValueError(f"A hint's colour must be three values in [0, 1], got {c!r}.")
+            object.__setattr__(self, "color", c)
+        if self.height is not None:
+            lo, hi = (float(v) for v in self.height)
+            if not 0.0 < lo <= hi <= 1.0:
+                raise ValueError(
+                    f"A hint's height band must be 0 < lo <= hi <= 1, got {self.height!r}."
+                )
+            object.__setattr__(self, "height", (lo, hi))
+
+    def reaches(self, mean: float) -> bool:
+        """Whether a Gaussian at ``mean`` shows this hint's material."""
+        if self.center is None:
+            return True
+        return abs(mean - self.center) <= max(_REACH * self.spread, _MIN_REACH)
+
+    def to_dict(self) -> dict:
+        return {
+            "name": self.name,
+            "center": self.center,
+            "spread": self.spread,
+            "color": list(self.color) if self.color else None,
+            "height": list(self.height) if self.height else None,
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> Hint:
+        return cls(
+            name=str(d.get("name", "")),
+            center=None if d.get("center") is None else float(d["center"]),
+            spread=float(d.get("spread", 0.03)),
+            color=None if d.get("color") is None else tuple(d["color"]),
+            height=None if d.get("height") is None else tuple(d["height"]),
+        )
+
+
+def as_hints(hints: Sequence[Hint | Mapping | object]) -> tuple[Hint, ...]:
+    """Hints from :class:`Hint` objects, dicts, or objects with the same attributes."""
+    out = []
+    for h in hints:
+        if isinstance(h, Hint):
+            out.append(h)
+        elif isinstance(h, Mapping):
+            out.append(Hint.from_dict(h))
+        elif hasattr(h, "to_explorer"):
+            out.append(Hint.from_dict(h.to_explorer()))
+        else:
+            raise ValueError(f"Not a material hint: {h!r}.")
+    return tuple(out)
+
+
+def hint_for(mean: float, hints: Sequence[Hint]) -> Hint | None:
+    """The hint whose material a Gaussian at ``mean`` shows (the nearest), or None."""
+    best, best_d = None, math.inf
+    for h in hints:
+        if not h.reaches(mean):
+            continue
+        d = 0.0 if h.center is None else abs(mean - h.center)
+        if d < best_d:
+            best, best_d = h, d
+    return best
+
+
+def sample_hint_height(
+    rng: np.random.Generator, band: tuple[float, float], bounds: Bounds
+) -> float:
+    """A height drawn log-uniformly from ``band``, within the bounds."""
+    lo, hi = band
+    v = math.exp(rng.uniform(math.log(lo), math.log(hi)))
+    return min(bounds.height[1], max(bounds.height[0], v))
+
+
+def hinted_tf(
+    rng: np.random.Generator,
+    hints: Sequence[Hint],
+    materials: Sequence[Material],
+    n_gaussians: int,
+    bounds: Bounds,
+    *,
+    value_range: tuple[float, float] | None = None,
+    color: Callable[[np.random.Generator], RGB] | None = None,
+    hide_prob: float = 0.7,
+) -> GaussianTF:
+    """A TF that shows what the hints ask for: one Gaussian per placed hint, the rest quiet.
+
+    Each hint with a ``center`` gets a Gaussian near it (about its spread wide), in its colour
+    (slightly varied; ``color`` when the hint names none) and with a height from its band
+    (the bounds' initial range when it names none). With more hints than Gaussians a random
+    subset is used. Gaussians left over go to the volume's other ``materials`` and are hidden
+    (height 0) with ``hide_prob``, else faint: what the words did not name stays out of the
+    way, but remains one toggle from view.
+    """
+    color = color or bounds.sample_color
+    placed = [h for h in hints if h.center is not None]
+    if len(placed) > n_gaussians:
+        pick = sorted(int(i) for i in rng.choice(len(placed), size=n_gaussians, replace=False))
+        placed = [placed[i] for i in pick]
+    gs: list[Gaussian] = []
+    for h in placed:
+        mean = min(bounds.mean[1], max(bounds.mean[0], h.center + rng.normal(0.0, 0.2 * h.spread)))
+        width = min(
+            bounds.width[1], max(bounds.width[0], h.spread * math.exp(rng.normal(0.0, 0.3)))
+        )
+        band = h.height or bounds.height_init
+        height = sample_hint_height(rng, band, bounds)
+        rgb = bounds.sample_palette_color(rng, [h.color]) if h.color else color(rng)
+        gs.append(Gaussian(mean, width, height, rgb))
+    others = [m for m in materials if all(not h.reaches(m.center) for h in placed)]
+    order = list(rng.permutation(len(others))) if others else []
+    while len(gs) < n_gaussians:
+        if order:
+            m = others[int(order.pop())]
+            mean, width = m.center, min(bounds.width[1], max(bounds.width[0], m.spread))
+        else:
+            mean, width = float(rng.uniform(*bounds.mean)), bounds.sample_width(rng)
+        if rng.random() < hide_prob:
+            height = 0.0
+        else:
+            lo = bounds.height_init[0]
+            height = sample_hint_height(rng, (lo, max(lo, 0.03)), bounds)
+        gs.append(Gaussian(float(mean), float(width), height, color(rng)))
+    return GaussianTF(tuple(sorted(gs, key=lambda g: g.mean)), value_range=value_range)
