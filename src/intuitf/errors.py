@@ -43,3 +43,7 @@ class BudgetExhausted(IntuitfError):
 
 class SessionError(IntuitfError):
     """A run directory is missing, corrupt or cannot be written."""
+
+
+class RunCancelled(IntuitfError):
+    """A person cancelled the run; the generation in progress is replayed when it goes on."""

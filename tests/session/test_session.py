@@ -72,19 +72,22 @@ def test_run_folder_has_every_output(vol, tmp_path):
 
 
 def test_interrupted_run_resumes_to_the_same_result(vol, tmp_path):
-    ref = Session.create(
+    with Session.create(
         vol, intent=_intent(), settings=RunSettings(**SETTINGS), run_dir=tmp_path / "a"
-    ).run()
+    ) as first:
+        ref = first.run()
 
     def interrupt_in_generation_2(event):
-        if event.kind == "round" and event.generation == 2:
+        if event.type == "match_judged" and event.data["generation"] == 2:
             raise KeyboardInterrupt
 
     s = Session.create(
         vol, intent=_intent(), settings=RunSettings(**SETTINGS), run_dir=tmp_path / "b"
     )
-    out = s.run(interrupt_in_generation_2)
+    s.events.subscribe(interrupt_in_generation_2)
+    out = s.run()
     assert out.reason == "interrupted" and out.generations_done == 2
+    s.close()
     resumed = Session.resume(tmp_path / "b", vol, s.judge)
     assert resumed.generation == 2 and resumed.stage == "customize"
     out2 = resumed.run()
@@ -114,6 +117,7 @@ def test_budget_stop_is_clean_and_saved(vol, tmp_path):
         vol, intent=_intent(), judge=judge, settings=RunSettings(**SETTINGS), run_dir=tmp_path / "r"
     )
     out = s.run()
+    s.close()
     assert out.reason == "budget"
     assert 1 <= out.generations_done < 4
     rd = RunDirectory(tmp_path / "r")
@@ -169,7 +173,10 @@ def test_full_disk_ends_cleanly_and_the_run_resumes(vol, tmp_path, monkeypatch):
 
     monkeypatch.setattr(os, "replace", replace_until_disk_fills)
     run = tmp_path / "run"
-    out = Session.create(vol, intent=_intent(), settings=RunSettings(**SETTINGS), run_dir=run).run()
+    with Session.create(
+        vol, intent=_intent(), settings=RunSettings(**SETTINGS), run_dir=run
+    ) as broken:
+        out = broken.run()
     assert out.reason == "storage" and "disk is full" in out.message
     monkeypatch.setattr(os, "replace", real_replace)
     rd = RunDirectory(run)

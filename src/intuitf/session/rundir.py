@@ -104,6 +104,14 @@ class RunDirectory:
         return self.root / "generations"
 
     @property
+    def events(self) -> Path:
+        return self.root / "events.jsonl"
+
+    def generation_checkpoint(self, generation: int) -> Path:
+        """The saved state at the start of ``generation`` (after the one before it ended)."""
+        return self.root / "checkpoints" / f"gen{generation:03d}.json"
+
+    @property
     def population_file(self) -> Path:
         return self.root / "population" / "current.json"
 
@@ -183,6 +191,9 @@ class RunDirectory:
 
     def write_checkpoint(self, state: dict) -> None:
         atomic_write_json(self.checkpoint, state)
+
+    def write_generation_checkpoint(self, generation: int, state: dict) -> None:
+        atomic_write_json(self.generation_checkpoint(generation), state)
 
     def read_checkpoint(self) -> dict | None:
         if not self.checkpoint.exists():

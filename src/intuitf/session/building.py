@@ -1,0 +1,181 @@
+"""Building a run's parts from its spec: the judge with its verdict store and budget, the
+intent with its pictures, and the spec of a run folder written before specs existed.
+
+Every front end gets these from :meth:`Session.open` / :meth:`Session.resume`; none builds a
+judge or reopens a volume itself.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+from typing import Any
+
+from intuitf.errors import IntuitfError, SessionError
+from intuitf.evaluator.types import Intent
+from intuitf.session.spec import IntentSpec, JudgeSpec, RunSpec, parse_spec
+
+INTENT_PICTURES = ("reference", "sketch", "base")
+
+
+def build_judge(spec: JudgeSpec, run_dir: Path | None, protocol: str = "efficient"):
+    """The judge ``spec`` names, with its verdict store in ``run_dir`` and its budget.
+
+    The efficient tournament shows each pair in a seeded random order and re-asks only
+    surprising verdicts in the other order, so a model judge asks once per match; the paper's
+    protocol asks every pair in both orders. A model judge keeps every answer in
+    ``run_dir/verdicts.sqlite``; a resumed run's budget starts from what that store says was
+    already paid.
+    """
+    from intuitf.evaluator.factory import make_judge
+
+    if not spec.is_model:
+        return make_judge("metric")
+    from intuitf.evaluator.budget import Budget
+    from intuitf.evaluator.cache import VerdictCache
+
+    options: dict[str, Any] = {"swap": "never" if protocol == "efficient" else "always"}
+    options.update(spec.options)
+    if spec.base_url:
+        options["base_url"] = spec.base_url
+    cache = VerdictCache(run_dir / "verdicts.sqlite") if run_dir is not None else None
+    budget = None
+    if spec.budget_usd is not None or spec.budget_calls is not None:
+        budget = Budget(max_usd=spec.budget_usd, max_calls=spec.budget_calls)
+        spent = _spent(cache)
+        if spent is not None:
+            budget.calls, budget.usd = spent.calls, spent.usd
+    try:
+        return make_judge(spec.spec, cache=cache, budget=budget, **options)
+    except BaseException:
+        if cache is not None:
+            cache.close()
+        raise
+
+
+def _spent(cache):
+    """What the verdict store says was paid so far (None without a store)."""
+    if cache is None:
+        return None
+    spent = getattr(cache, "spent", None)
+    return spent() if callable(spent) else None
+
+
+def load_intent(spec: IntentSpec, root: Path | None = None) -> Intent:
+    """The :class:`Intent` of ``spec``, its pictures read (paths relative to ``root``)."""
+    from intuitf.imageio import load_image, load_image_rgba
+
+    pictures: dict[str, Any] = {}
+    for name in INTENT_PICTURES:
+        path = getattr(spec, name)
+        if path:
+            p = Path(path)
+            if root is not None and not p.is_absolute():
+                p = root / p
+            pictures[name] = load_image_rgba(p) if name == "sketch" else load_image(p)
+    intent = Intent(
+        kind=spec.kind,
+        text=spec.text,
+        about=spec.about,
+        selected=tuple(spec.selected),
+        **pictures,
+    )
+    validate = getattr(intent, "validate", None)
+    if callable(validate):
+        validate()
+    return intent
+
+
+def copy_intent_pictures(spec: RunSpec, root: Path, folder: str = "intent") -> RunSpec:
+    """Copy the intent's pictures into ``root/folder``; the returned spec points at the copies."""
+    changes: dict[str, str] = {}
+    for name in INTENT_PICTURES:
+        path = getattr(spec.intent, name)
+        if not path:
+            continue
+        src = Path(path)
+        rel = Path(folder) / f"{name}.png"
+        dst = root / rel
+        if src.resolve() != dst.resolve():
+            if not src.is_file():
+                raise IntuitfError(f"The {name} picture {src} does not exist.", "Check the path.")
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            _copy_as_png(src, dst, name)
+        changes[name] = rel.as_posix()
+    if not changes:
+        return spec
+    return spec.model_copy(update={"intent": spec.intent.model_copy(update=changes)})
+
+
+def save_intent_pictures(intent: Intent, root: Path, folder: str = "intent") -> dict[str, str]:
+    """Write an in-memory intent's pictures as PNGs under ``root/folder``; their paths."""
+    from intuitf.imageio import png_bytes
+    from intuitf.session.rundir import atomic_write_bytes
+
+    out = {}
+    for name in INTENT_PICTURES:
+        arr = getattr(intent, name)
+        if arr is not None:
+            rel = Path(folder) / f"{name}.png"
+            atomic_write_bytes(root / rel, png_bytes(arr))
+            out[name] = rel.as_posix()
+    return out
+
+
+def intent_spec_of(intent: Intent, pictures: dict[str, str]) -> IntentSpec:
+    """The spec form of an in-memory intent whose pictures were saved at ``pictures``."""
+    return IntentSpec.model_construct(
+        kind=intent.kind,
+        text=intent.text,
+        about=intent.about,
+        selected=list(intent.selected),
+        reference=pictures.get("reference"),
+        sketch=pictures.get("sketch"),
+        base=pictures.get("base"),
+    )
+
+
+def _copy_as_png(src: Path, dst: Path, what: str) -> None:
+    """Copy a picture, re-encoded as PNG (keeps the sketch's transparency)."""
+    from intuitf.imageio import load_image, load_image_rgba, png_bytes
+    from intuitf.session.rundir import atomic_write_bytes
+
+    if src.suffix.lower() == ".png":
+        shutil.copyfile(src, dst)
+        return
+    arr = load_image_rgba(src) if what == "sketch" else load_image(src)
+    atomic_write_bytes(dst, png_bytes(arr))
+
+
+def spec_of_record(record: dict) -> RunSpec:
+    """The spec of a run folder: ``run.json``'s own, or one rebuilt from an older record."""
+    if "spec" in record:
+        return parse_spec(record["spec"])
+    # Written before specs existed: the CLI kept the volume's source and the judge beside.
+    intent = record.get("intent", {}) or {}
+    pictures = {
+        n: f"intent/{n}.png" for n in INTENT_PICTURES if intent.get(f"has_{n}")
+    }  # the old layout kept them there
+    try:
+        return RunSpec.model_validate(
+            {
+                "volume": {"source": record.get("volume_source", "phantom"),
+                           **(record.get("volume_args") or {})},
+                "intent": {
+                    "kind": intent.get("kind", "none"),
+                    "text": intent.get("text"),
+                    "about": intent.get("about"),
+                    "selected": list(intent.get("selected", [])),
+                    **pictures,
+                },
+                "judge": {"spec": record.get("evaluator", "metric"),
+                          "base_url": record.get("base_url")},
+                "settings": record.get("settings", {}),
+                "initial": record.get("initial", []),
+            }
+        )  # fmt: skip
+    except Exception as exc:
+        raise SessionError(
+            f"The run's record cannot be read as a run spec: {exc}.",
+            "Start a new run; this folder was written by an incompatible intuitf.",
+        ) from exc

@@ -1,0 +1,109 @@
+"""Interactive views of a transfer function: picture, pick, feature decomposition, attribution.
+
+These run with their own camera and size, apart from the judging camera, so looking at a
+result never changes what the tournament sees. The :class:`ViewRenderer` keeps one renderer per
+(size, shading) and the sample cache of the last camera it was asked about, so a click and
+the decomposition that follows it share one pass through the volume.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+
+from intuitf.errors import RenderError
+from intuitf.tf import GaussianTF
+
+#: A feature counts as visible at a pixel when it holds at least this share of its opacity.
+VISIBLE_SHARE = 0.02
+
+
+@dataclass(frozen=True)
+class PickResult:
+    """The feature chosen at a pixel by the paper's rule, and what was there to choose from.
+
+    ``index`` is the Gaussian with the smallest projected area among those visible at the
+    pixel (None on empty background); ``visible`` lists (index, share at the pixel, area in
+    pixels) for every visible Gaussian; ``mask`` marks the chosen feature's pixels.
+    """
+
+    index: int | None
+    visible: tuple[tuple[int, float, int], ...]
+    mask: np.ndarray | None
+
+
+class ViewRenderer:
+    """Renders of one volume for interaction, cached per size, shading and camera."""
+
+    def __init__(self, volume, background=(0.0, 0.0, 0.0)) -> None:
+        self.volume = volume
+        self.background = tuple(background)
+        self._renderers: dict[tuple[int, bool], object] = {}
+        self._cache_key = None
+        self._cache = None
+        self._lock = threading.Lock()
+
+    def renderer(self, size: int, shading: bool):
+        from intuitf.render import VolumeRenderer
+
+        with self._lock:
+            r = self._renderers.get((size, shading))
+            if r is None:
+                r = VolumeRenderer(
+                    self.volume, size=size, shading=shading, background=self.background
+                )
+                self._renderers[(size, shading)] = r
+            return r
+
+    def sample_cache(self, camera, size: int, shading: bool):
+        key = (repr(camera.to_dict()), size, shading)
+        with self._lock:
+            if self._cache_key == key:
+                return self._cache
+        cache = self.renderer(size, shading).sample_cache(camera)
+        with self._lock:
+            self._cache_key, self._cache = key, cache
+        return cache
+
+    # -- the views ------------------------------------------------------------------------
+    def view(self, tf: GaussianTF, camera, size: int, shading: bool) -> np.ndarray:
+        """uint8 RGB (size, size, 3) of ``tf`` from ``camera``."""
+        return self.renderer(size, shading).render(tf, camera)
+
+    def attribution(self, tf: GaussianTF, camera, size: int, shading: bool) -> np.ndarray:
+        """Each Gaussian's share of each pixel's opacity: float32 (N, size, size)."""
+        return self.sample_cache(camera, size, shading).attribution(tf)
+
+    def pick(self, tf: GaussianTF, camera, x: int, y: int, size: int, shading: bool) -> PickResult:
+        """The feature under pixel (x, y): the smallest projected area among the visible ones."""
+        if not (0 <= x < size and 0 <= y < size):
+            raise RenderError(
+                f"Pixel ({x}, {y}) is outside the {size}×{size} view.",
+                "Give x and y from the top-left corner, within the view's size.",
+            )
+        return pick_smallest(self.attribution(tf, camera, size, shading), x, y)
+
+    def features(self, tf: GaussianTF, camera, size: int, shading: bool) -> list[np.ndarray]:
+        """Each Gaussian rendered alone (over a faint ghost of the whole), in TF order."""
+        cache = self.sample_cache(camera, size, shading)
+        return [cache.render_feature(tf, i) for i in range(len(tf))]
+
+
+def pick_smallest(attribution: np.ndarray, x: int, y: int) -> PickResult:
+    """The paper's rule over an attribution map (N, H, W): of the features visible at (x, y),
+    the one whose projected area (pixels where it is visible) is smallest."""
+    visible_map = attribution >= VISIBLE_SHARE
+    areas = visible_map.reshape(len(attribution), -1).sum(axis=1)
+    here = [int(i) for i in np.flatnonzero(visible_map[:, y, x])]
+    visible = tuple(
+        sorted(
+            ((i, float(attribution[i, y, x]), int(areas[i])) for i in here),
+            key=lambda t: (t[2], -t[1], t[0]),
+        )
+    )
+    if not visible:
+        return PickResult(None, (), None)
+    chosen = visible[0][0]
+    return PickResult(chosen, visible, visible_map[chosen].copy())
