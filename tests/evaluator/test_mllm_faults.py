@@ -70,19 +70,22 @@ def test_hang_times_out_and_is_retried(oracle_images):
 
 
 @pytest.mark.parametrize("kind", ["refusal", "blind", "malformed", "truncated"])
-def test_unusable_answers_become_logged_uncached_ties(oracle_images, kind, caplog):
+def test_answers_unusable_every_time_become_logged_uncached_ties(oracle_images, kind, caplog):
     target, c = oracle_images
     cache = VerdictCache(":memory:")
     with FakeMLLMServer(target=target, faults={kind: 1.0}) as srv:
         judge = _fast(srv, cache=cache)
         with caplog.at_level(logging.WARNING, logger="intuitf.evaluator.mllm"):
             v = asyncio.run(judge.compare(c[0], c[5], Q, Intent()))
-    assert v.overall is Choice.TIE and v.p_first == 0.5
+    assert v.overall is Choice.TIE and v.p_first == 0.5 and not v.decided
     reason = {"blind": "blind", "refusal": "refusal"}.get(kind, "unreadable")
     assert v.error and v.error.startswith(reason)
     assert set(v.per_aspect.values()) == {Choice.TIE}
-    assert v.cost.calls == 1  # the answer was paid for, even if useless
-    assert len(cache) == 0  # and it is not kept as a real answer
+    # Asked again before giving up: a refusal once more, anything else answer_retries times.
+    asked = 2 if kind == "refusal" else 1 + judge.answer_retries
+    assert v.retries == asked - 1
+    assert v.cost.calls == asked == srv.stats.requests  # every answer was paid for, even useless
+    assert len(cache) == 0  # and none is kept as a real answer
     assert "tie" in caplog.text
 
 

@@ -4,13 +4,26 @@ One ``AsyncOpenAI`` client per judge (per event loop) reaches OpenAI, Gemini, Ol
 Studio, OpenRouter or any compatible server. The SDK's own retries are off; this module retries
 with exponential backoff and jitter, honouring ``Retry-After``.
 
-**Failure rule.** A comparison becomes a *logged tie* (``Verdict.error`` set, not cached) when
-the server answered but the answer is unusable: a refusal, "cannot see the image", or text with
-no readable choice. It raises :class:`~intuitf.errors.JudgeError` when the server gives no answer
-after ``max_retries`` retries (unreachable, timeouts, 429 or 5xx every time) or rejects the
-request itself (bad key, unknown model): a session should then stop, keep what it has (every
-paid answer is already in the cache) and resume later. :class:`~intuitf.errors.BudgetExhausted`
-is raised *before* a call that would go past the budget.
+**Unusable answers are asked again.** An answer with no readable choice (unparseable or cut
+off) is followed up with a corrective message ("answer only with the JSON object ..."), a
+refusal with a short explanation of the task (once: a second refusal is final), and a "blind"
+answer (the model says it cannot see the images) by sending the question again; at most
+``answer_retries`` times per answer. Only when every try was unusable does the comparison become
+a *logged tie* (``Verdict.error`` set, the verdict *undecided*, not cached). ``Verdict.retries``
+says how many re-asks a verdict took.
+
+**Failure rule.** It raises :class:`~intuitf.errors.JudgeError` when the server gives no answer
+after ``max_retries`` retries or within ``deadline`` seconds (unreachable, timeouts, 429 or 5xx
+every time) or rejects the request itself (bad key, unknown model): a session should then stop,
+keep what it has (every paid answer is already in the cache) and resume later. Each request
+waits at most ``timeout`` seconds, so a server that accepts connections but never answers fails
+an answer within ``deadline`` (defaults 30 s and 60 s, or ``[judge]`` in the config file); for a
+while after that, other answers fail at once instead of waiting for the same dead server.
+:class:`~intuitf.errors.BudgetExhausted` is raised *before* a call that would go past the budget.
+
+**Spend.** With a verdict store, every request is recorded in it before it is sent and settled
+when answered (usable or not), so the run's spend is exact across kills and resumes (see
+:mod:`intuitf.evaluator.cache`).
 
 **Swap debiasing** (``swap``):
 
@@ -46,8 +59,23 @@ from intuitf.evaluator.cache import VerdictCache, request_key
 from intuitf.evaluator.compose import ImageFormat, Layout, comparison_images, content_parts
 from intuitf.evaluator.parsing import UnreadableAnswer, parse_answer
 from intuitf.evaluator.pricing import PriceTable
-from intuitf.evaluator.prompts import SYSTEM_PROMPT, response_format, user_prompt
-from intuitf.evaluator.providers import CUSTOM, ProviderPreset, Secret, preset, require_api_key
+from intuitf.evaluator.prompts import (
+    FOLLOW_UP_REFUSAL,
+    FOLLOW_UP_TRUNCATED,
+    FOLLOW_UP_UNREADABLE,
+    SYSTEM_PROMPT,
+    response_format,
+    user_prompt,
+)
+from intuitf.evaluator.providers import (
+    CUSTOM,
+    ProviderPreset,
+    Secret,
+    judge_timeouts,
+    preset,
+    redact_url,
+    require_api_key,
+)
 from intuitf.evaluator.types import Aspect, Choice, Cost, Intent, Verdict
 
 log = logging.getLogger(__name__)
@@ -74,6 +102,7 @@ class _OrderResult:
     error: str | None = None
     cached: bool = False
     swapped: bool = False
+    retries: int = 0
 
 
 class MLLMJudge:
@@ -85,7 +114,12 @@ class MLLMJudge:
     side by side; ``image_format`` is "png" or "jpeg" (quality ``jpeg_quality``). ``structured``
     asks for JSON-schema output and falls back to plain text, for the rest of this judge's life,
     when the server rejects it. The API key comes from ``api_key``, the provider's environment
-    variable or the config file, and is never shown.
+    variable or the config file, and is never shown; credentials in ``base_url`` are used but
+    shown redacted (``base_url`` holds the redacted form).
+
+    ``timeout`` is the most one request may take and ``deadline`` the most one answer may take,
+    retries of failed requests included (None: ``[judge]`` in the config file, else 30 s and
+    60 s). ``answer_retries`` is how often an unusable answer is asked again.
     """
 
     def __init__(
@@ -100,7 +134,7 @@ class MLLMJudge:
         image_format: ImageFormat = "png",
         jpeg_quality: int = 90,
         max_concurrency: int = 32,
-        timeout: float = 60.0,
+        timeout: float | None = None,
         max_retries: int = 4,
         cache: VerdictCache | None = None,
         budget: Budget | None = None,
@@ -111,6 +145,8 @@ class MLLMJudge:
         backoff_base: float = 0.5,
         backoff_max: float = 30.0,
         name: str | None = None,
+        deadline: float | None = None,
+        answer_retries: int = 2,
     ) -> None:
         if swap not in ("always", "never", "auto"):
             raise JudgeError(f"Unknown swap mode {swap!r}.", "Use 'always', 'never' or 'auto'.")
@@ -118,9 +154,20 @@ class MLLMJudge:
             raise JudgeError(f"Unknown image layout {compose!r}.", "Use 'parts' or 'side_by_side'.")
         if image_format not in ("png", "jpeg"):
             raise JudgeError(f"Unknown image format {image_format!r}.", "Use 'png' or 'jpeg'.")
-        if max_concurrency < 1 or timeout <= 0 or max_retries < 0:
+        if timeout is None or deadline is None:
+            default_timeout, default_deadline = judge_timeouts()
+            timeout = default_timeout if timeout is None else timeout
+            deadline = default_deadline if deadline is None else deadline
+        if (
+            max_concurrency < 1
+            or not timeout > 0
+            or not deadline > 0
+            or max_retries < 0
+            or answer_retries < 0
+        ):
             raise JudgeError(
-                "max_concurrency must be ≥ 1, timeout > 0 and max_retries ≥ 0.",
+                "max_concurrency must be ≥ 1, timeout and deadline > 0, max_retries and "
+                "answer_retries ≥ 0.",
                 "Check the judge options.",
             )
         p: ProviderPreset = (
@@ -128,7 +175,9 @@ class MLLMJudge:
         )
         self.provider = p.name
         self.model = model or p.default_model
-        self.base_url = (base_url or p.base_url).rstrip("/") + "/"
+        url = (base_url or p.base_url).rstrip("/") + "/"
+        self._url = Secret(url)  # may hold credentials: used, never shown
+        self.base_url = redact_url(url)
         self.name = name or f"{p.name}:{self.model}"
         self._api_key = Secret(require_api_key(p, api_key))
         self.swap: SwapMode = swap
@@ -137,7 +186,9 @@ class MLLMJudge:
         self.jpeg_quality = int(jpeg_quality)
         self.max_concurrency = int(max_concurrency)
         self.timeout = float(timeout)
+        self.deadline = float(deadline)
         self.max_retries = int(max_retries)
+        self.answer_retries = int(answer_retries)
         self.cache = cache
         self.budget = budget
         self.prices = prices or PriceTable()
@@ -153,10 +204,13 @@ class MLLMJudge:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._rng = random.Random()
         self._dearest_usd = 0.0
+        #: When an answer last ran out of time (monotonic clock), and why.
+        self._gave_up_at: float | None = None
+        self._gave_up: str = ""
 
     def __repr__(self) -> str:
         return (
-            f"MLLMJudge(name={self.name!r}, base_url={self.base_url!r}, swap={self.swap!r}, "
+            f"MLLMJudge(name={redact_url(self.name)!r}, base_url={self.base_url!r}, swap={self.swap!r}, "
             f"compose={self.compose!r}, max_concurrency={self.max_concurrency})"
         )
 
@@ -168,7 +222,7 @@ class MLLMJudge:
         if self._loop is not loop or self._client is None or self._sem is None:
             self._client = AsyncOpenAI(
                 api_key=self._api_key.reveal(),
-                base_url=self.base_url,
+                base_url=self._url.reveal(),
                 max_retries=0,
                 timeout=self.timeout,
             )
@@ -186,7 +240,7 @@ class MLLMJudge:
         key = self._api_key.reveal()
         if key and len(key) >= 4:
             text = text.replace(key, "***")
-        return text
+        return redact_url(text) or ""
 
     def _backoff(self, attempt: int, retry_after: float | None) -> float:
         if retry_after is not None:
@@ -204,6 +258,15 @@ class MLLMJudge:
         tokens_in = len(prompt) // 4 + n_images * _IMAGE_TOKENS_GUESS
         return self.prices.cost(self.model, tokens_in, 300)
 
+    def _no_answer(self, message: str) -> JudgeError:
+        return JudgeError(
+            message,
+            "Check that the server is running and answering (one that accepts connections but "
+            "never answers looks like this; a slow model needs a longer --request-timeout or "
+            "--answer-deadline). Every answer received so far is kept in the verdict store: "
+            "continue with `intuitf optimize --resume RUN`.",
+        )
+
     async def _complete(
         self, messages: list[dict], schema: dict, estimate: float
     ) -> tuple[Any, Cost]:
@@ -212,7 +275,15 @@ class MLLMJudge:
         cost = Cost()
         last = "no attempt"
         attempt = 0
+        started: float | None = None  # when the first attempt got its turn
+        deadline_hit = False
         while attempt <= self.max_retries:
+            if self._gave_up_at is not None and started is None:
+                if time.monotonic() - self._gave_up_at < self.deadline:
+                    # Another answer just ran out of time on this server: do not queue behind it.
+                    self.cost += cost
+                    raise self._no_answer(self._gave_up)
+                self._gave_up_at = None
             kwargs: dict[str, Any] = {
                 "model": self.model,
                 "messages": messages,
@@ -223,14 +294,28 @@ class MLLMJudge:
             if structured:
                 kwargs["response_format"] = schema
             reserved = self.budget.reserve(estimate) if self.budget is not None else 0.0
+            row = None
             t0 = time.perf_counter()
             try:
                 async with sem:
+                    now = time.monotonic()
+                    if started is None:
+                        started = now
+                    left = self.deadline - (now - started)
+                    if left <= 0:
+                        deadline_hit = True
+                        raise _OutOfTime
+                    kwargs["timeout"] = min(self.timeout, left)
+                    if self.cache is not None:
+                        row = self.cache.begin_spend(self.name, reserved)
                     t0 = time.perf_counter()
                     resp = await client.chat.completions.create(**kwargs)
-            except openai.APIStatusError as exc:
+            except _OutOfTime:
                 if self.budget is not None:
                     self.budget.release(reserved)
+                break
+            except openai.APIStatusError as exc:
+                self._unpaid(reserved, row)
                 cost.seconds += time.perf_counter() - t0
                 status = exc.status_code
                 if structured and status in (400, 415, 422):
@@ -253,12 +338,13 @@ class MLLMJudge:
                 last = f"HTTP {status}"
                 wait = self._backoff(attempt, _retry_after(exc.response))
             except (openai.APITimeoutError, openai.APIConnectionError) as exc:
-                if self.budget is not None:
-                    self.budget.release(reserved)
+                self._unpaid(reserved, row)
                 cost.seconds += time.perf_counter() - t0
                 cost.failed_calls += 1
                 last = (
-                    "timed out" if isinstance(exc, openai.APITimeoutError) else "connection failed"
+                    f"timed out after {kwargs.get('timeout', self.timeout):.3g} s"
+                    if isinstance(exc, openai.APITimeoutError)
+                    else "connection failed"
                 )
                 wait = self._backoff(attempt, None)
             else:
@@ -267,14 +353,20 @@ class MLLMJudge:
                 usd = self.prices.cost(self.model, tin, tout)
                 if self.budget is not None:
                     self.budget.settle(reserved, usd)
+                if row is not None:
+                    self.cache.settle_spend(row, tin, tout, usd)  # type: ignore[union-attr]
                 cost.calls += 1
                 cost.input_tokens += tin
                 cost.output_tokens += tout
                 cost.usd += usd
                 self._dearest_usd = max(self._dearest_usd, usd)
+                self._gave_up_at = None
                 return resp, cost
             attempt += 1
             if attempt > self.max_retries:
+                break
+            if started is not None and time.monotonic() + wait - started >= self.deadline:
+                deadline_hit = True
                 break
             log.warning(
                 "%s: call failed (%s), retry %d of %d in %.2f s.",
@@ -286,12 +378,26 @@ class MLLMJudge:
             )
             await asyncio.sleep(wait)
         self.cost += cost
-        raise JudgeError(
-            f"The model server for {self.name} at {self.base_url} gave no answer after "
-            f"{self.max_retries + 1} attempts (last: {last}).",
-            "Check that the server is running and reachable, then resume the run: every answer "
-            "received so far is kept in the verdict cache.",
-        )
+        tries = f"{attempt} attempt{'s' if attempt != 1 else ''}"
+        if deadline_hit:
+            message = (
+                f"The model server for {self.name} at {self.base_url} gave no answer within "
+                f"{self.deadline:g} s ({tries}; last: {last})."
+            )
+            self._gave_up_at, self._gave_up = time.monotonic(), message
+        else:
+            message = (
+                f"The model server for {self.name} at {self.base_url} gave no answer after "
+                f"{tries} (last: {last})."
+            )
+        raise self._no_answer(message)
+
+    def _unpaid(self, reserved: float, row: int | None) -> None:
+        """A request got no answer: give its budget back and drop its spend record."""
+        if self.budget is not None:
+            self.budget.release(reserved)
+        if row is not None and self.cache is not None:
+            self.cache.cancel_spend(row)
 
     async def _ask(
         self,
@@ -337,23 +443,42 @@ class MLLMJudge:
             {"role": "user", "content": [{"type": "text", "text": prompt}, *parts]},
         ]
         estimate = self._estimate_usd(prompt, len(images))
-        resp, cost = await self._complete(messages, response_format(aspects, intent), estimate)
-        text, refusal, finish = _message(resp)
-        try:
-            if refusal:
-                raise UnreadableAnswer("refusal", refusal)
-            if finish == "content_filter" and not text:
-                raise UnreadableAnswer("refusal", "blocked by the server's content filter")
-            parsed = parse_answer(text, aspects)
-        except UnreadableAnswer as exc:
-            msg = f"{exc.reason}: {self._redact(exc.detail)[:160]}"
-            log.warning("%s: unusable answer counted as a tie (%s).", self.name, msg)
-            return _OrderResult(
-                per_aspect={a.key: Choice.TIE for a in aspects},
-                cost=cost,
-                error=msg,
-                swapped=swapped,
-            )
+        schema = response_format(aspects, intent)
+        cost = Cost()
+        conversation = messages
+        retries = refusals = 0
+        while True:
+            resp, paid = await self._complete(conversation, schema, estimate)
+            cost += paid
+            text, refusal, finish = _message(resp)
+            try:
+                if refusal:
+                    raise UnreadableAnswer("refusal", refusal)
+                if finish == "content_filter" and not text:
+                    raise UnreadableAnswer("refusal", "blocked by the server's content filter")
+                parsed = parse_answer(text, aspects)
+                break
+            except UnreadableAnswer as exc:
+                reason = "truncated" if finish == "length" else exc.reason
+                msg = f"{reason}: {self._redact(exc.detail)[:160]}"
+                refusals += reason == "refusal"
+                if retries >= self.answer_retries or refusals > 1:
+                    log.warning(
+                        "%s: unusable answer counted as a tie after %d re-ask(s) (%s).",
+                        self.name,
+                        retries,
+                        msg,
+                    )
+                    return _OrderResult(
+                        per_aspect={a.key: Choice.TIE for a in aspects},
+                        cost=cost,
+                        error=msg,
+                        swapped=swapped,
+                        retries=retries,
+                    )
+                retries += 1
+                log.info("%s: unusable answer (%s); asking again.", self.name, msg)
+                conversation = _follow_up(messages, reason, text or refusal)
         rationale = dict(parsed.rationale)
         if parsed.reference_description:
             rationale["reference_description"] = parsed.reference_description
@@ -370,7 +495,9 @@ class MLLMJudge:
                     "usd": cost.usd,
                 },
             )
-        return _OrderResult(orient(parsed.per_aspect), rationale, cost, swapped=swapped)
+        return _OrderResult(
+            orient(parsed.per_aspect), rationale, cost, swapped=swapped, retries=retries
+        )
 
     # -- the Judge protocol -------------------------------------------------------------------
 
@@ -421,6 +548,7 @@ class MLLMJudge:
         for r in results:
             cost += r.cost
         valid = [r for r in results if r.error is None]
+        retries = sum(r.retries for r in results)
         if not valid:
             return Verdict(
                 per_aspect={a.key: Choice.TIE for a in aspects},
@@ -428,6 +556,7 @@ class MLLMJudge:
                 p_first=0.5,
                 cost=cost,
                 error="; ".join(r.error or "" for r in results),
+                retries=retries,
             )
         overall, p, per = _combine(valid, aspects)
         rationale: dict[str, str] = {}
@@ -445,7 +574,27 @@ class MLLMJudge:
             cost=cost,
             rationale=rationale,
             cached=all(r.cached for r in results),
+            retries=retries,
         )
+
+
+class _OutOfTime(Exception):
+    """The answer's deadline passed before another attempt could start."""
+
+
+def _follow_up(messages: list[dict], reason: str, answer: str | None) -> list[dict]:
+    """The conversation to send after an unusable answer (see the module notes)."""
+    if reason == "blind":
+        return messages  # the images may not have come through: send them again
+    text = {
+        "refusal": FOLLOW_UP_REFUSAL,
+        "truncated": FOLLOW_UP_TRUNCATED,
+    }.get(reason, FOLLOW_UP_UNREADABLE)
+    return [
+        *messages,
+        {"role": "assistant", "content": (answer or "")[:4000]},
+        {"role": "user", "content": text},
+    ]
 
 
 def _combine(

@@ -21,6 +21,22 @@ CHOICES = ("first", "second", "cannot decide")
 #: What a model should answer when an image did not reach it (recognised by the parser).
 CANNOT_SEE = "CANNOT SEE IMAGES"
 
+#: Follow-ups when an answer was unusable (the judge asks again within its re-ask budget).
+FOLLOW_UP_UNREADABLE = (
+    "Your answer could not be read. Answer again with only the JSON object described above: "
+    'no other text and no code fence; for each aspect key, a short "analysis" and a "choice" '
+    'of "first", "second" or "cannot decide".'
+)
+FOLLOW_UP_TRUNCATED = (
+    "Your answer was cut off before it ended. Answer again with only the JSON object described "
+    "above, keeping each analysis to one short sentence."
+)
+FOLLOW_UP_REFUSAL = (
+    "These are two renderings of scientific volume data, and the task is only to compare how "
+    "well each shows the data. Please compare them on the listed aspects and answer with only "
+    "the JSON object described above."
+)
+
 SYSTEM_PROMPT = (
     "You compare pictures made by direct volume rendering: the same volume rendered with "
     "different transfer functions, which map data values to colour and opacity. You judge only "

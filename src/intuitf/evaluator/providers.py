@@ -9,7 +9,15 @@ environment variable(s), then ``[api_keys]`` in the config file
     openai = "sk-..."
     gemini = "..."
 
-Keys are never logged, printed, stored or put in error messages.
+Keys are never logged, printed, stored or put in error messages, nor are credentials written
+into a server URL (``http://user:KEY@host/v1``): :func:`redact_url` hides them.
+
+The same file sets how long a model judge waits (``MLLMJudge`` options and the ``optimize``
+command's ``--request-timeout`` / ``--answer-deadline`` take precedence)::
+
+    [judge]
+    request_timeout = 30   # seconds for one request
+    answer_deadline = 60   # seconds for one answer, retries of failed requests included
 """
 
 from __future__ import annotations
@@ -150,18 +158,47 @@ def config_path() -> Path:
     return Path(env) if env else Path.home() / ".config" / "intuitf" / "config.toml"
 
 
-def _key_from_config(provider: str) -> str | None:
+#: A dead server (it accepts the connection and never answers) fails an answer after about
+#: ``DEFAULT_ANSWER_DEADLINE`` seconds: two requests of ``DEFAULT_REQUEST_TIMEOUT``.
+DEFAULT_REQUEST_TIMEOUT = 30.0
+DEFAULT_ANSWER_DEADLINE = 60.0
+
+
+def _read_config() -> dict:
     path = config_path()
     if not path.is_file():
-        return None
+        return {}
     try:
-        data = tomllib.loads(path.read_text("utf-8"))
+        return tomllib.loads(path.read_text("utf-8"))
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         # The message names the file and the problem, never the file's content.
         raise JudgeError(
             f"The config file {path} could not be read ({type(exc).__name__}).",
             "Fix its TOML syntax, or set the key in the environment instead.",
         ) from None
+
+
+def judge_timeouts() -> tuple[float, float]:
+    """(request timeout, answer deadline) in seconds: ``[judge]`` in the config, else defaults."""
+    table = _read_config().get("judge", {})
+    table = table if isinstance(table, dict) else {}
+    out = []
+    for key, default in (
+        ("request_timeout", DEFAULT_REQUEST_TIMEOUT),
+        ("answer_deadline", DEFAULT_ANSWER_DEADLINE),
+    ):
+        value = table.get(key, default)
+        if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
+            raise JudgeError(
+                f"{key} in the config file {config_path()} must be a number of seconds above 0.",
+                f"Fix it under [judge], e.g. {key} = {default:g}.",
+            )
+        out.append(float(value))
+    return out[0], out[1]
+
+
+def _key_from_config(provider: str) -> str | None:
+    data = _read_config()
     keys = data.get("api_keys", {})
     value = keys.get(provider) if isinstance(keys, dict) else None
     return value if isinstance(value, str) and value else None

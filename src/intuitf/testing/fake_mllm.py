@@ -18,7 +18,8 @@ Realism knobs, all seeded: ``latency`` (seconds, fixed or a distribution), ``noi
 (probability of the wrong answer), ``position_bias`` (probability of preferring the first image
 regardless), and ``faults`` ({kind: rate}) among :data:`FAULT_KINDS`.
 
-Run it on its own with ``python -m intuitf.testing.fake_mllm --port 8000 --target image.png``.
+Run it on its own with ``python -m intuitf.testing.fake_mllm --port 8000 --target image.png``;
+``GET /stats`` returns what it saw (requests, answers, faults), the judge of what a run spent.
 """
 
 from __future__ import annotations
@@ -119,6 +120,8 @@ class ServerStats:
     input_tokens: int = 0
     output_tokens: int = 0
     structured_requests: int = 0
+    #: Requests that continue a conversation (an earlier answer and a follow-up message).
+    follow_ups: int = 0
 
 
 def _small(img: np.ndarray) -> np.ndarray:
@@ -251,10 +254,18 @@ class FakeMLLMServer:
                 "data": [{"id": self.model, "object": "model", "owned_by": "intuitf"}],
             }
 
+        @app.get("/stats")
+        async def stats() -> dict:
+            """What the server saw so far (requests, answers, faults ...): the judge of spending."""
+            with self._lock:
+                return json.loads(json.dumps(self.stats.__dict__))
+
         @app.post("/v1/chat/completions")
         async def chat(request: Request) -> Any:
             body = await request.json()
             with self._lock:
+                if any(m.get("role") == "assistant" for m in body.get("messages", [])):
+                    self.stats.follow_ups += 1
                 self.stats.requests += 1
                 self.stats.in_flight += 1
                 self.stats.max_in_flight = max(self.stats.max_in_flight, self.stats.in_flight)
