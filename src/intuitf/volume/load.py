@@ -22,9 +22,11 @@ Conventions, the same for every format:
 
 from __future__ import annotations
 
+import errno
 import gzip
 import importlib
 import os
+import stat
 import struct
 import zlib
 from collections.abc import Callable
@@ -35,7 +37,7 @@ import numpy as np
 from intuitf.errors import VolumeError
 from intuitf.volume.request import RawArray, ReadRequest
 from intuitf.volume.resample import downsample
-from intuitf.volume.volume import Volume
+from intuitf.volume.volume import Volume, scan_values
 
 #: Names that mean the built-in phantom rather than a file.
 PHANTOM_NAMES = ("builtin:phantom", "phantom")
@@ -113,13 +115,7 @@ def load_volume(
         return _finish_phantom(vol, spacing, max_dim, name)
 
     p = Path(text).expanduser()
-    if not p.exists():
-        hint = "Check the path."
-        if p.parent.is_dir():
-            near = sorted(q.name for q in p.parent.iterdir() if q.name[:3] == p.name[:3])[:5]
-            if near:
-                hint += " Files with a similar name: " + ", ".join(near) + "."
-        raise VolumeError(f"{p}: no such file or folder.", hint)
+    _check_path(p)
     reader, raw_opts = _reader_for(p)
     req = ReadRequest(
         path=p,
@@ -145,6 +141,7 @@ def load_volume(
         ValueError,
         KeyError,
         IndexError,
+        StopIteration,
         struct.error,
     ) as exc:
         raise VolumeError(
@@ -161,6 +158,39 @@ def load_volume(
         if ignored:
             notes.append(f"Ignored {', '.join(ignored)}: the file's header describes it.")
     return _finish(got, req, notes, name or got.name or _default_name(p))
+
+
+def _check_path(p: Path) -> None:
+    """Raise :class:`VolumeError` saying why ``p`` cannot be read: missing, a symbolic-link
+    loop, unreadable, or an empty file."""
+    try:
+        st = p.stat()
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise VolumeError(
+                f"{p}: a loop of symbolic links (it points back to itself); there is no file "
+                "behind it.",
+                f"Check where it points with `ls -l {p}` and link it to the real file.",
+            ) from None
+        if exc.errno in (errno.ENOENT, errno.ENOTDIR):
+            hint = "Check the path."
+            if p.is_symlink():
+                hint = f"{p} is a symbolic link to {os.readlink(p)}, which does not exist."
+            elif p.parent.is_dir():
+                near = sorted(q.name for q in p.parent.iterdir() if q.name[:3] == p.name[:3])[:5]
+                if near:
+                    hint += " Files with a similar name: " + ", ".join(near) + "."
+            raise VolumeError(f"{p}: no such file or folder.", hint) from None
+        raise VolumeError(
+            f"{p}: cannot be opened ({exc.strerror or exc}).", "Check the path and its permissions."
+        ) from None
+    except RuntimeError:  # Python < 3.13 reports a symlink loop from resolve() this way
+        raise VolumeError(f"{p}: a loop of symbolic links.", "Link it to the real file.") from None
+    if stat.S_ISREG(st.st_mode) and st.st_size == 0:
+        raise VolumeError(
+            f"{p}: the file is empty (0 bytes).",
+            "It was probably not copied or downloaded completely; get the file again.",
+        )
 
 
 def _default_name(p: Path) -> str:
@@ -199,52 +229,26 @@ def _finish(got: RawArray, req: ReadRequest, notes: list[str], name: str) -> Vol
         )
     a = a.astype(a.dtype.newbyteorder("="), copy=False) if not a.dtype.isnative else a
     z, y, x = a.shape
-    value_range = None
-    fill = None
     if req.max_dim is not None and max(a.shape) > req.max_dim:
-        lo, hi, n_bad = _finite_min_max(a)
-        if n_bad == a.size:
-            raise VolumeError(f"{req.path}: every voxel is NaN or Inf; there is nothing to render.")
-        if n_bad:
-            fill = lo
-            notes.append(
-                f"{n_bad} NaN/Inf voxel(s) ({100.0 * n_bad / a.size:.3g}%) replaced by the "
-                f"minimum finite value {lo:g}."
+        scan = scan_values(a, str(req.path))
+        lo, hi = scan.lo, scan.hi
+        if hi > lo:  # (a constant volume is reported by from_array below)
+            small, spacing = downsample(
+                a, spacing, req.max_dim, fill=scan.fill, limit=scan.limit, value_range=(lo, hi)
             )
-        value_range = (lo, hi)
-        if not hi > lo:
-            value_range = None  # let from_array report the constant volume
-        else:
-            original = a.dtype
-            small, spacing = downsample(a, spacing, req.max_dim, fill=fill)
             nz, ny, nx = small.shape
+            notes += scan.notes()
             notes.append(
                 f"Downsampled from {x}x{y}x{z} to {nx}x{ny}x{nz} (max_dim {req.max_dim}; "
                 "anti-aliased linear resampling, physical size kept)."
             )
-            vol = Volume.from_array(
-                small, spacing=spacing, name=name, source=str(req.path), value_range=value_range
-            )
-            vol.original_dtype = original.name
-            vol.notes = notes + vol.notes
-            return vol
-    vol = Volume.from_array(np.asarray(a), spacing=spacing, name=name, source=str(req.path))
+            return Volume(
+                data=small, spacing=spacing, name=name, original_dtype=a.dtype.name,
+                value_range=(lo, hi), source=str(req.path), notes=notes,
+            )  # fmt: skip
+    vol = Volume.from_array(a, spacing=spacing, name=name, source=str(req.path))
     vol.notes = notes + vol.notes
     return vol
-
-
-def _finite_min_max(a: np.ndarray) -> tuple[float, float, int]:
-    """Finite min, max and the count of non-finite values, slab by slab (memmap friendly)."""
-    lo, hi, bad = np.inf, -np.inf, 0
-    for z0 in range(0, a.shape[0], 32):
-        s = np.asarray(a[z0 : z0 + 32])
-        if s.dtype.kind == "f":
-            fin = np.isfinite(s)
-            bad += int(s.size - np.count_nonzero(fin))
-            s = s[fin]
-        if s.size:
-            lo, hi = min(lo, float(s.min())), max(hi, float(s.max()))
-    return lo, hi, bad
 
 
 def _finish_phantom(vol: Volume, spacing, max_dim, name) -> Volume:

@@ -12,6 +12,7 @@ import numpy as np
 from scipy import ndimage
 
 from intuitf.volume.request import output_dims
+from intuitf.volume.volume import clean_slab
 
 _SLAB = 16  # z-slices per slab: small enough to bound memory, large enough to be quick
 
@@ -25,24 +26,36 @@ def downsample(
     spacing: tuple[float, float, float],
     max_dim: int,
     fill: float | None = None,
+    limit: float | None = None,
+    value_range: tuple[float, float] | None = None,
 ) -> tuple[np.ndarray, tuple[float, float, float]]:
     """Shrink ``array`` (``[z, y, x]``) so that its largest axis is ``max_dim``.
 
     Returns the float32 result and the new spacing (x, y, z). ``fill`` replaces non-finite
-    values (NaN/Inf) before filtering, so they do not spread. Arrays already small enough are
-    returned as float32 unchanged.
+    values (NaN/Inf), and values beyond ``limit``, before filtering, so they do not spread.
+    With ``value_range`` (lo, hi) each slab is first normalised to [0, 1] in float64, so data
+    near the limits of its type neither overflows nor loses precision. Arrays already small
+    enough are returned as float32 (normalised when asked) unchanged otherwise.
     """
     z, y, x = array.shape
     nx, ny, nz = output_dims((x, y, z), max_dim)
+
+    def prepared(slab: np.ndarray) -> np.ndarray:
+        if value_range is None and fill is None:
+            return np.asarray(slab, dtype=np.float32)
+        s = clean_slab(slab, fill, limit)
+        if value_range is not None:
+            lo, hi = value_range
+            s = np.clip((s - lo) / (hi - lo), 0.0, 1.0)
+        return s.astype(np.float32)
+
     if (nx, ny, nz) == (x, y, z):
-        return np.asarray(array, dtype=np.float32), spacing
+        return prepared(np.asarray(array)), spacing
     zoom_xy = (ny / y, nx / x)
     sig_xy = (_sigma(y, ny), _sigma(x, nx))
     reduced = np.empty((z, ny, nx), dtype=np.float32)
     for z0 in range(0, z, _SLAB):
-        slab = np.asarray(array[z0 : z0 + _SLAB], dtype=np.float32)
-        if fill is not None:
-            slab = np.where(np.isfinite(slab), slab, np.float32(fill))
+        slab = prepared(array[z0 : z0 + _SLAB])
         for k in range(slab.shape[0]):
             img = ndimage.gaussian_filter(slab[k], sig_xy, mode="nearest")
             reduced[z0 + k] = ndimage.zoom(img, zoom_xy, order=1, mode="nearest", grid_mode=False)

@@ -31,6 +31,12 @@ def read(request: ReadRequest) -> RawArray:
         with np.load(path, allow_pickle=False) as z:
             keys = list(z.files)
             arrays = [k for k in keys if k != "spacing"]
+            if not arrays:
+                what = "only a 'spacing' array" if keys else "no arrays at all"
+                raise VolumeError(
+                    f"{path}: the .npz holds {what}; there is no volume in it.",
+                    "Save the volume as np.savez(path, data=volume, spacing=(sx, sy, sz)).",
+                )
             key = next((k for k in ("data", "volume") if k in keys), None)
             if key is None and len(arrays) == 1:
                 key = arrays[0]

@@ -33,6 +33,11 @@ def read(request: ReadRequest) -> RawArray:
     path = request.path
     try:
         header = nrrd.read_header(str(path))
+    except StopIteration:  # pynrrd runs out of lines: an empty or cut-off header
+        raise VolumeError(
+            f"{path}: the NRRD header ends before its first line is complete (empty file?).",
+            "Check that the file is a complete NRRD file.",
+        ) from None
     except nrrd.NRRDError as exc:
         raise VolumeError(
             f"{path}: not a valid NRRD header ({exc}).",
@@ -52,7 +57,7 @@ def read(request: ReadRequest) -> RawArray:
     request.reserve(tuple(sizes), dtype)  # type: ignore[arg-type]
     try:
         data, header = nrrd.read(str(path), index_order="C")
-    except nrrd.NRRDError as exc:
+    except (nrrd.NRRDError, StopIteration) as exc:
         raise VolumeError(
             f"{path}: the NRRD data could not be read ({exc}).",
             "Check that the file (and a detached data file) is complete.",

@@ -145,20 +145,29 @@ def _gzip_isize(path: Path) -> int | None:
         return struct.unpack("<I", fh.read(4))[0]
 
 
-def _corrupt(path: Path, exc: BaseException) -> VolumeError:
-    return VolumeError(
-        f"{path}: the gzip stream is corrupt or truncated ({exc}).",
-        "Download or copy the file again; check it with `gzip -t`.",
-    )
-
-
-def _check_gzip_start(path: Path) -> None:
-    """Decompress the first bytes of a gzip file, raising VolumeError if they are corrupt."""
+def _gzip_size(path: Path) -> tuple[int, BaseException | None]:
+    """Decompressed size of a gzip file, counted by streaming it through a small buffer, and
+    the error that stopped the count early (a truncated or corrupt stream), if any."""
+    n = 0
     try:
         with gzip.open(path, "rb") as fh:
-            fh.read(1 << 16)
+            while k := len(fh.read(1 << 16)):
+                n += k
     except (OSError, EOFError, zlib.error) as exc:
-        raise _corrupt(path, exc) from None
+        return n, exc
+    return n, None
+
+
+def _cut_off(path: Path, got: int, expected: int, dims, dtype, exc: BaseException) -> VolumeError:
+    shape = "x".join(str(d) for d in dims)
+    if isinstance(exc, EOFError):
+        what = f"the gzip stream is cut off: the file is truncated after about {got} decompressed bytes"
+    else:
+        what = f"the gzip stream is corrupt after about {got} decompressed bytes ({exc})"
+    return VolumeError(
+        f"{path}: {what}, and a {shape} {dtype.name} volume needs {expected} bytes.",
+        "Download or copy the file again; `gzip -t` checks a gzip file.",
+    )
 
 
 def read(request: ReadRequest) -> RawArray:
@@ -195,11 +204,14 @@ def read(request: ReadRequest) -> RawArray:
         return RawArray(arr, spacing=None, name=name)
 
     isize = _gzip_isize(path)
-    if isize is not None and isize != expected % (1 << 32):
-        # The trailer says the size is wrong; trust it only if the stream itself is sound,
-        # so a corrupt file is reported as corrupt, not as a wrong shape.
-        _check_gzip_start(path)
-        raise _size_mismatch(path, expected, isize, dims, dtype, compressed=True)
+    if isize is None or isize != expected % (1 << 32):
+        # The trailer disagrees with the shape, but a truncated file's last bytes are no
+        # trailer at all: count the stream's real size (nothing kept in memory) and report
+        # what is actually wrong.
+        actual, error = _gzip_size(path)
+        if error is not None:
+            raise _cut_off(path, actual, expected, dims, dtype, error)
+        raise _size_mismatch(path, expected, actual, dims, dtype, compressed=True)
     request.reserve(dims, dtype)
     arr = np.empty((z, y, x), dtype=dtype)
     buf = memoryview(arr.reshape(-1)).cast("B")
@@ -214,7 +226,7 @@ def read(request: ReadRequest) -> RawArray:
                 got += k
             extra = len(fh.read(1 << 16)) if got == expected else 0
     except (OSError, EOFError, zlib.error) as exc:
-        raise _corrupt(path, exc) from None
+        raise _cut_off(path, got, expected, dims, dtype, exc) from None
     if got != expected or extra:
         raise _size_mismatch(path, expected, got + extra, dims, dtype, compressed=True)
     return RawArray(arr, spacing=None, name=name)
