@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import shutil
 import time
 from pathlib import Path
 
@@ -13,8 +12,8 @@ from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeEl
 from rich.table import Table
 
 from intuitf.cli import options as vo
-from intuitf.errors import IntuitfError, SessionError
-from intuitf.evaluator.factory import judge_record
+from intuitf.errors import IntuitfError
+from intuitf.tf import load_tf
 
 console = Console()
 
@@ -22,103 +21,75 @@ DEMO_TEXT = "opaque ivory bone, faint red skin"
 DEMO_ABOUT = "a CT-like phantom of a human head"
 
 
-def _build_intent(text, image, sketch, on, about):
-    from intuitf.evaluator.types import Intent
-    from intuitf.imageio import load_image, load_image_rgba
-
+def _intent_spec(text, image, sketch, on, about) -> dict:
+    """The intent of the command line, as spec data (pictures by path)."""
     if sketch is not None:
         if on is None:
             raise IntuitfError(
                 "--sketch needs --on BASE.png: the rendering the strokes were drawn on."
             )
-        return Intent(
-            kind="sketch",
-            text=text,
-            sketch=load_image_rgba(sketch),
-            base=load_image(on),
-            about=about,
-        )
+        return {"kind": "sketch", "text": text, "sketch": str(sketch), "base": str(on),
+                "about": about}  # fmt: skip
     if image is not None:
-        return Intent(kind="image", text=text, reference=load_image(image), about=about)
+        return {"kind": "image", "text": text, "reference": str(image), "about": about}
     if text:
-        return Intent(kind="text", text=text, about=about)
-    return Intent(kind="none", about=about)
+        return {"kind": "text", "text": text, "about": about}
+    return {"kind": "none", "about": about}
 
 
-def _make_judge(
-    spec: str,
-    run_dir: Path,
-    base_url,
-    budget_usd,
-    budget_calls,
-    resumed=False,
-    protocol="efficient",
-    request_timeout=None,
-    answer_deadline=None,
-):
-    from intuitf.evaluator.budget import Budget
-    from intuitf.evaluator.cache import VerdictCache
-    from intuitf.evaluator.factory import make_judge
+def _judge_spec(evaluator, base_url, budget_usd, budget_calls, timeouts) -> dict:
+    options = {}
+    if timeouts.get("request_timeout") is not None:
+        options["timeout"] = timeouts["request_timeout"]
+    if timeouts.get("answer_deadline") is not None:
+        options["deadline"] = timeouts["answer_deadline"]
+    return {"spec": evaluator or "metric", "base_url": base_url, "budget_usd": budget_usd,
+            "budget_calls": budget_calls, "options": options}  # fmt: skip
 
-    # The efficient tournament shows each pair in a seeded random order and re-asks only
-    # surprising verdicts in the other order, so the judge asks once per match; the paper's
-    # protocol asks every pair in both orders.
-    options = {"swap": "never" if protocol == "efficient" else "always"}
-    if base_url:
-        options["base_url"] = base_url
-    if request_timeout is not None:
-        options["timeout"] = request_timeout
-    if answer_deadline is not None:
-        options["deadline"] = answer_deadline
-    budget = None
-    if budget_usd is not None or budget_calls is not None:
-        budget = Budget(max_usd=budget_usd, max_calls=budget_calls)
-    if spec == "metric":
-        return make_judge(spec)
-    created = not run_dir.exists()
-    run_dir.mkdir(parents=True, exist_ok=True)
-    try:
-        cache = VerdictCache(run_dir / "verdicts.sqlite")
-        if resumed and budget is not None:
-            # A resumed run's budget covers the whole run: what the store says was paid
-            # (exact, also for an interrupted generation and calls a killed process had out).
-            budget.restore(cache.spent(), *cache.unsettled())
-        return make_judge(spec, cache=cache, budget=budget, **options)
-    except IntuitfError:
-        # A bad spec or a missing API key must not leave an empty run folder behind.
-        if created:
-            shutil.rmtree(run_dir, ignore_errors=True)
-        raise
+
+def _timeout_options(timeouts: dict) -> dict:
+    return _judge_spec(None, None, None, None, timeouts)["options"]
 
 
 class _ProgressView:
-    """Rich progress: generation, tournament round, calls, cost so far, time left."""
+    """Rich progress from the session's events: generation, matches, calls, cost, time left."""
 
-    def __init__(self, progress: Progress) -> None:
+    def __init__(self, progress: Progress, session) -> None:
         self.progress = progress
-        self.task = None
+        self.session = session
+        self.task = progress.add_task("starting", total=session.total_generations,
+                                      completed=session.generation)  # fmt: skip
+        self.matches = 0
+        self.what = "starting"
 
     def __call__(self, e) -> None:
-        if self.task is None:
-            self.task = self.progress.add_task(
-                "starting", total=e.generations, completed=e.generation
-            )
+        s = self.session
+        d = e.data
+        if e.type == "generation_started":
+            self.matches, self.what = 0, "rendering"
+        elif e.type == "rendered":
+            self.what = "judging"
+        elif e.type == "match_judged":
+            self.matches += 1
+            self.what = f"{self.matches} matches"
+        elif e.type == "generation_ended":
+            self.what = "done"
+        elif e.type == "run_ended":
+            self.what = "finished"
+        else:
+            return
         left = ""
-        if e.seconds_per_generation:
-            remaining = (e.generations - e.generation) * e.seconds_per_generation
-            left = f" · ~{remaining:.0f}s left"
-        what = {
-            "generation_start": "rendering",
-            "rendered": "judging",
-            "round": f"round {e.round}/{e.rounds}",
-            "generation_end": "done",
-            "end": "finished",
-        }.get(e.kind, e.kind)
+        if s.generation_seconds:
+            per = sum(s.generation_seconds) / len(s.generation_seconds)
+            left = f" · ~{(s.total_generations - s.generation) * per:.0f}s left"
+        generation = d.get("generation", s.generation)
+        cost = s.cost
         desc = (
-            f"gen {min(e.generation + 1, e.generations)}/{e.generations} [{e.stage}] {what} · "
-            f"{e.cost.calls} calls ({e.cost.cached_calls} cached) · ${e.cost.usd:.3f}{left}"
+            f"gen {min(generation + 1, s.total_generations)}/{s.total_generations} [{s.stage}] "
+            f"{self.what} · {cost.calls} calls ({cost.cached_calls} cached) · ${cost.usd:.3f}{left}"
         )
-        self.progress.update(self.task, description=desc, completed=e.generation)
+        self.progress.update(self.task, description=desc, completed=s.generation,
+                             total=s.total_generations)  # fmt: skip
 
 
 def _run_with_progress(session):
@@ -130,9 +101,11 @@ def _run_with_progress(session):
         console=console,
         transient=False,
     ) as progress:
+        unsubscribe = session.events.subscribe(_ProgressView(progress, session))
         try:
-            return session.run(_ProgressView(progress))
+            return session.run()
         finally:
+            unsubscribe()
             session.close()
 
 
@@ -250,6 +223,12 @@ def register(app: typer.Typer) -> None:
             help="Draw part of the new colours from those the intent asks for (the reference "
             "picture's, the sketch's, or the colours named in --text).",
         ),
+        hints: bool = typer.Option(
+            True,
+            "--hints/--no-hints",
+            help="Seed the first population, and steer colour and opacity mutations, from the "
+            "materials --text names (e.g. 'opaque ivory bone': ivory, opaque, on the bone).",
+        ),
         azimuth: float = typer.Option(None, "--azimuth"),
         elevation: float = typer.Option(None, "--elevation"),
         refine: Path = typer.Option(
@@ -280,46 +259,58 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Find transfer functions that match what you want, unattended."""
 
+        from intuitf.session import Session
+
         started = time.perf_counter()
         timeouts = dict(request_timeout=request_timeout, answer_deadline=answer_deadline)
         if resume is not None:
-            session = _resume_session(
-                resume, budget_usd, budget_calls, base_url, evaluator, **timeouts
+            session = Session.resume(
+                resume,
+                evaluator=evaluator,
+                base_url=base_url,
+                budget_usd=budget_usd,
+                budget_calls=budget_calls,
+                judge_options=_timeout_options(timeouts),
             )
+            _print_lock_note(session)
+            if session.judge_moved:
+                console.print(
+                    f"Moving this run to [bold]{escape(session.judge_name)}[/] from generation "
+                    f"{session.generation + 1} on (recorded in run.json)."
+                )
+            if session.done:
+                console.print("[green]This run is already complete.[/] Rewriting its outputs.")
         else:
-            evaluator = evaluator or "metric"
             if volume is None:
                 raise IntuitfError("Give a VOLUME to optimize (or 'phantom'), or --resume RUN_DIR.")
-            vol_args = dict(
-                shape=shape, dtype=dtype, byte_order=byte_order, spacing=spacing, max_dim=max_dim
-            )
-            vol = vo.open_volume(volume, **vol_args)
-            for note in vol.notes:
-                console.print(f"[yellow]note:[/] {escape(note)}")
-            intent = _build_intent(text, image, sketch, on, about)
-            run_dir = output or Path("runs") / f"{vol.name}-{time.strftime('%Y%m%d-%H%M%S')}"
-            settings_kw = dict(
+            volume_spec = {"source": volume, **vo.volume_kwargs(shape, dtype, byte_order,
+                                                                spacing, max_dim)}  # fmt: skip
+            settings = dict(
                 population=population, generations=generations, n_gaussians=gaussians, seed=seed,
                 explorer=explorer, protocol=protocol, image_size=size, output_size=output_size,
                 top_k=top, shading=shading, camera=_camera_dict(azimuth, elevation),
-                palette_hint=palette,
+                palette_hint=palette, material_hints=hints,
             )  # fmt: skip
-            record = {
-                "volume_source": volume,
-                "volume_args": vol_args,
-                **judge_record(evaluator, base_url),
-            }
+            intent = _intent_spec(text, image, sketch, on, about)
+            initial = [load_tf(p).to_dict() for p in start_from or []]
             if refine is not None:
-                session = _refine_session(
-                    vol, refine, select, text, about, evaluator, base_url, run_dir, settings_kw,
-                    budget_usd, budget_calls, overwrite, record, timeouts,
-                )  # fmt: skip
-            else:
-                session = _new_session(
-                    vol, intent, evaluator, base_url, run_dir, settings_kw, budget_usd,
-                    budget_calls, start_from or [], overwrite, record, timeouts,
-                )  # fmt: skip
-        _print_lock_note(session)
+                tf_dict, picked = _refinement(refine, select, text)
+                intent = {"kind": "edit", "text": text, "about": about, "selected": picked}
+                initial = [tf_dict]
+            spec = {
+                "volume": volume_spec,
+                "intent": intent,
+                "judge": _judge_spec(evaluator, base_url, budget_usd, budget_calls, timeouts),
+                "settings": settings,
+                "initial": initial,
+            }
+            run_dir = output or Path("runs") / (
+                f"{_volume_name(volume)}-{time.strftime('%Y%m%d-%H%M%S')}"
+            )
+            session = Session.open(spec, run_dir, overwrite=overwrite)
+            for note in session.volume.notes:
+                console.print(f"[yellow]note:[/] {escape(note)}")
+            _print_lock_note(session)
         console.print(
             f"Optimizing [bold]{session.volume.name}[/] with {getattr(session.judge, 'name', 'judge')}: "
             f"population {session.settings.population}, {session.total_generations} generations "
@@ -339,40 +330,22 @@ def register(app: typer.Typer) -> None:
         population: int = typer.Option(24, "--population"),
     ) -> None:
         """Run the main job end to end on built-in inputs: phantom volume, offline judge, a text intent."""
-        from intuitf.evaluator.types import Intent
+        from intuitf.session import Session
         from intuitf.volume import phantom
 
         started = time.perf_counter()
         vol = phantom()
-        intent = Intent(kind="text", text=DEMO_TEXT, about=DEMO_ABOUT)
         console.print(
             f"Demo: optimizing the built-in phantom for “{DEMO_TEXT}” with the offline metric judge."
         )
-        session = _new_session(
-            vol,
-            intent,
-            "metric",
-            None,
-            output,
-            dict(
-                population=population,
-                generations=generations,
-                seed=0,
-                image_size=160,
-                output_size=384,
-                top_k=4,
-            ),
-            None,
-            None,
-            [],
-            True,
-            {
-                "volume_source": "phantom",
-                "volume_args": {},
-                "evaluator": "metric",
-                "base_url": None,
-            },
-        )
+        spec = {
+            "volume": "phantom",
+            "intent": {"kind": "text", "text": DEMO_TEXT, "about": DEMO_ABOUT},
+            "judge": "metric",
+            "settings": dict(population=population, generations=generations, seed=0,
+                             image_size=160, output_size=384, top_k=4),
+        }  # fmt: skip
+        session = Session.open(spec, output, overwrite=True, volume=vol)
         outcome = _run_with_progress(session)
         _print_summary(outcome, session, started)
         if outcome.run_dir is not None:
@@ -394,68 +367,17 @@ def _camera_dict(azimuth, elevation) -> dict:
     return Camera(**d).to_dict()
 
 
-def _new_session(
-    vol,
-    intent,
-    evaluator,
-    base_url,
-    run_dir,
-    settings_kw,
-    budget_usd,
-    budget_calls,
-    start_from,
-    overwrite,
-    record,
-    timeouts=None,
-):
-    from intuitf.session import Session
-    from intuitf.tf import load_tf
-
-    settings, run_dir, judge = _prepare_run(
-        settings_kw, run_dir, overwrite, evaluator, base_url, budget_usd, budget_calls,
-        **(timeouts or {}),
-    )  # fmt: skip
-    initial = [load_tf(p) for p in start_from]
-    return Session.create(
-        vol,
-        intent=intent,
-        judge=judge,
-        settings=settings,
-        run_dir=run_dir,
-        initial=initial,
-        overwrite=overwrite,
-        extra_record=record,
-    )
+def _volume_name(source: str) -> str:
+    name = Path(source).name
+    for suffix in (".gz", ".raw", ".nrrd", ".nhdr", ".nii", ".mha", ".mhd", ".vti", ".npy",
+                   ".npz", ".tif", ".tiff", ".cvol"):  # fmt: skip
+        if name.lower().endswith(suffix):
+            name = name[: -len(suffix)]
+    return name or "volume"
 
 
-def _prepare_run(
-    settings_kw, run_dir, overwrite, evaluator, base_url, budget_usd, budget_calls, **timeouts
-):
-    """Validated settings, a run folder that holds no other run, and the judge for it."""
-    from intuitf.session import RunSettings
-
-    settings = RunSettings(**settings_kw)
-    settings.validate()
-    run_dir = Path(run_dir)
-    if (run_dir / "run.json").exists() and not overwrite:
-        raise SessionError(
-            f"{run_dir} already holds a run.",
-            f"Continue it with --resume {run_dir}, or pick another folder with -o (or --overwrite).",
-        )
-    judge = _make_judge(
-        evaluator, run_dir, base_url, budget_usd, budget_calls, protocol=settings.protocol,
-        **timeouts,
-    )  # fmt: skip
-    return settings, run_dir, judge
-
-
-def _refine_session(
-    vol, tf_path, select, text, about, evaluator, base_url, run_dir, settings_kw,
-    budget_usd, budget_calls, overwrite, record, timeouts=None,
-):  # fmt: skip
-    from intuitf.session import Session
-    from intuitf.tf import load_tf
-
+def _refinement(tf_path: Path, select: str | None, text: str | None) -> tuple[dict, list[int]]:
+    """The TF to refine and the 0-based indices of the Gaussians --select names (1-based)."""
     if not select or not text:
         raise IntuitfError(
             "--refine needs --select (which Gaussians to change) and --text (what to change).",
@@ -470,47 +392,4 @@ def _refine_session(
         raise IntuitfError(
             f"--select must name Gaussians 1..{len(tf)} of {tf_path}; got {select!r}."
         )
-    settings, run_dir, judge = _prepare_run(
-        settings_kw, run_dir, overwrite, evaluator, base_url, budget_usd, budget_calls,
-        **(timeouts or {}),
-    )  # fmt: skip
-    return Session.refine(
-        vol, tf, picked, text, judge=judge, settings=settings, run_dir=run_dir, about=about,
-        overwrite=overwrite, extra_record=record,
-    )  # fmt: skip
-
-
-def _resume_session(run_dir: Path, budget_usd, budget_calls, base_url, evaluator=None, **timeouts):
-    from intuitf.evaluator.factory import record_judge_move, resume_judge_spec
-    from intuitf.session import RunDirectory, Session
-
-    rd = RunDirectory(run_dir)
-    record = rd.read_run()
-    vol = vo.open_volume(record.get("volume_source", "phantom"), **record.get("volume_args", {}))
-    # --evaluator / --base-url on a resume move the run to another model or server.
-    spec, url, moved = resume_judge_spec(record, evaluator, base_url)
-    judge = _make_judge(
-        spec,
-        rd.root,
-        url,
-        budget_usd,
-        budget_calls,
-        resumed=True,
-        protocol=record.get("settings", {}).get("protocol", "efficient"),
-        **timeouts,
-    )
-    session = Session.resume(rd.root, vol, judge)
-    _print_lock_note(session)
-    if moved:
-        record = rd.read_run()  # as the resume left it
-        entry = record_judge_move(record, spec, url, session.generation)
-        rd.write_run(record)
-        rd.append_journal({"type": "judge", **entry})
-        console.print(
-            f"Moving this run to [bold]{escape(entry['evaluator'])}[/]"
-            + (f" at {escape(entry['base_url'])}" if entry.get("base_url") else "")
-            + f" from generation {entry['from_generation'] + 1} on (recorded in run.json)."
-        )
-    if session.done:
-        console.print("[green]This run is already complete.[/] Rewriting its outputs.")
-    return session
+    return tf.to_dict(), picked

@@ -42,9 +42,10 @@ def build_judge(spec: JudgeSpec, run_dir: Path | None, protocol: str = "efficien
     budget = None
     if spec.budget_usd is not None or spec.budget_calls is not None:
         budget = Budget(max_usd=spec.budget_usd, max_calls=spec.budget_calls)
-        spent = _spent(cache)
-        if spent is not None:
-            budget.calls, budget.usd = spent.calls, spent.usd
+        if cache is not None:
+            # The budget covers the whole run: what the store says was paid, including the
+            # requests a killed process had under way.
+            budget.restore(cache.spent(), *cache.unsettled())
     try:
         return make_judge(spec.spec, cache=cache, budget=budget, **options)
     except BaseException:
@@ -53,12 +54,28 @@ def build_judge(spec: JudgeSpec, run_dir: Path | None, protocol: str = "efficien
         raise
 
 
-def _spent(cache):
-    """What the verdict store says was paid so far (None without a store)."""
-    if cache is None:
-        return None
-    spent = getattr(cache, "spent", None)
-    return spent() if callable(spent) else None
+def resumed_judge_spec(spec: JudgeSpec, evaluator: str | None, base_url: str | None):
+    """The judge spec a resume uses, and whether the run moves to another model or server.
+
+    A recorded address whose credentials were redacted must be given again (the error says so).
+    """
+    from intuitf.evaluator.factory import resume_judge_spec
+
+    new, url, moved = resume_judge_spec(
+        {"evaluator": spec.spec, "base_url": spec.base_url}, evaluator, base_url
+    )
+    return spec.model_copy(update={"spec": new, "base_url": url}), moved
+
+
+def redacted(spec: RunSpec) -> RunSpec:
+    """``spec`` as it may be stored or shown: credentials in URLs replaced by ``***``."""
+    from intuitf.evaluator.providers import redact_url
+
+    j = spec.judge
+    return spec.model_copy(
+        update={"judge": j.model_copy(update={"spec": redact_url(j.spec),
+                                             "base_url": redact_url(j.base_url)})}
+    )  # fmt: skip
 
 
 def load_intent(spec: IntentSpec, root: Path | None = None) -> Intent:

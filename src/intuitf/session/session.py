@@ -186,6 +186,8 @@ class Session:
         self._cancel = False
         self._stepping = False
         self._snapshot: SessionSnapshot | None = None
+        #: Whether the resume that made this session moved the run to another judge.
+        self.judge_moved = False
         # A private event loop for the synchronous wrappers (step/run): model clients keep
         # connections bound to the loop they were made in.
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -328,9 +330,11 @@ class Session:
         if rd is not None:
             rd.create(overwrite=overwrite)
             spec = _spec_for_record(spec, intent, settings, initial, judge, rd)
+            from intuitf.session.building import redacted
+
             rd.write_run(
                 {
-                    "spec": spec.to_dict(),
+                    "spec": redacted(spec).to_dict(),
                     "volume": volume.summary(),
                     "intent": _intent_record(intent),
                     "judge": _judge_name(judge),
@@ -439,7 +443,7 @@ class Session:
         the budgets replace the run's and count everything the run already paid.
         """
         from intuitf.explorer import explorer_from_state
-        from intuitf.session.building import build_judge, load_intent, spec_of_record
+        from intuitf.session.building import build_judge, load_intent, redacted, spec_of_record
         from intuitf.session.lock import RunLock
 
         rd = RunDirectory(run_dir)
@@ -450,14 +454,15 @@ class Session:
             spec = spec_of_record(record)
             settings = RunSettings.from_dict(record["settings"])
             spec, moved = _moved_spec(spec, evaluator, base_url, budget_usd, budget_calls,
-                                      judge_options)  # fmt: skip
+                                      judge_options, judge is None)  # fmt: skip
             ckpt = rd.read_checkpoint()
             vol = volume if volume is not None else spec.volume.load()
             if judge is None:
                 judge = build_judge(spec.judge, rd.root, settings.protocol)
             generation = int(ckpt["generation"]) if ckpt else 0
-            if moved or spec.to_dict() != record.get("spec"):
-                record["spec"] = spec.to_dict()
+            stored = redacted(spec).to_dict()
+            if moved or stored != record.get("spec"):
+                record["spec"] = stored
                 judges = record.setdefault("judges", [])
                 if moved:
                     judges.append({"judge": _judge_name(judge), "from_generation": generation})
@@ -475,7 +480,8 @@ class Session:
                 sess.run_dir = rd
                 sess.name = rd.root.name
                 sess.events = EventLog(sess.name, rd.events)
-                sess.cost = _paid(judge, sess.cost)
+                sess.cost = _paid(judge, sess.cost, rd)
+                sess.judge_moved = moved
                 sess._refresh()
                 if moved:
                     sess._journal({"type": "judge", "generation": 0, "judge": _judge_name(judge)})
@@ -489,7 +495,7 @@ class Session:
                 explorer=explorer_from_state(ckpt["explorer"]),
                 stage_index=int(ckpt["stage_index"]),
                 generation=generation,
-                cost=_paid(judge, Cost(**ckpt.get("cost", {}))),
+                cost=_paid(judge, Cost(**ckpt.get("cost", {})), rd),
                 ratings={k: float(v) for k, v in ckpt.get("ratings", {}).items()},
                 last_ranking=list(ckpt.get("ranking", [])),
                 population_tfs={k: GaussianTF.from_dict(v) for k, v in ckpt.get("tfs", {}).items()},
@@ -508,6 +514,7 @@ class Session:
                 sess._judged_stage = int(ckpt.get("judged_stage", sess.stage_index))
             if ckpt.get("intent"):
                 sess._current_intent_record = ckpt["intent"]
+            sess.judge_moved = moved
             if moved:
                 sess._journal(
                     {"type": "judge", "generation": generation, "judge": _judge_name(judge)}
@@ -598,6 +605,16 @@ class Session:
     @property
     def status(self) -> str:
         return self._status
+
+    @property
+    def judge_name(self) -> str:
+        """The judge's name, with any credentials in a URL redacted."""
+        return _judge_name(self.judge)
+
+    @property
+    def lock(self):
+        """The run folder's lock (None in memory)."""
+        return self._lock
 
     def snapshot(self) -> SessionSnapshot:
         """An immutable view of the session, safe to read from any thread."""
@@ -1011,7 +1028,7 @@ class Session:
             except (BudgetExhausted, JudgeError, RunCancelled) as exc:
                 partial = getattr(exc, "partial", None)
                 if partial is not None:
-                    self.cost = _paid(self.judge, base_cost + partial.cost)
+                    self.cost = _paid(self.judge, base_cost + partial.cost, self.run_dir)
                     self._journal(
                         {
                             "type": "partial",
@@ -1041,7 +1058,7 @@ class Session:
             # Fitness comes from the ranking and the stage's pressure schedule.
             self.explorer.tell(ranking)
             seconds = time.perf_counter() - t0
-            self.cost = _paid(self.judge, base_cost + result.cost)
+            self.cost = _paid(self.judge, base_cost + result.cost, self.run_dir)
             self.cost.seconds = base_cost.seconds + seconds
             self.ratings = ratings
             self.last_ranking = ranking
@@ -1086,6 +1103,9 @@ class Session:
                     "cost_usd": result.cost.usd,
                     "seconds": seconds,
                     "match_stats": stats,
+                    "decided": stats["decided"],
+                    "undecided": stats["undecided"],
+                    "retried": stats["retried"],
                     "matches": [_match_dict(m) for m in result.matches],
                 }
             )
@@ -1355,18 +1375,14 @@ def _judge_name(judge) -> str:
     return redact_url(str(name))
 
 
-def _paid(judge, cost: Cost) -> Cost:
-    """``cost`` with calls, tokens and money as the verdict store recorded them (exact across
-    resumes and kills), when the judge keeps one."""
-    from intuitf.session.building import _spent
+def _paid(judge, cost: Cost, rd: RunDirectory | None) -> Cost:
+    """``cost`` with calls, tokens and money as the run's verdict store recorded them (exact
+    across resumes and kills), when the judge keeps its answers there."""
+    from intuitf.evaluator.budget import run_spend, with_spend
 
-    spent = _spent(getattr(judge, "cache", None))
-    if spent is None:
+    if rd is None:
         return cost
-    out = Cost(**cost.to_dict())
-    out.calls, out.usd = spent.calls, spent.usd
-    out.input_tokens, out.output_tokens = spent.input_tokens, spent.output_tokens
-    return out
+    return with_spend(cost, run_spend(judge, rd.verdicts))
 
 
 def _intent_record(intent: Intent) -> dict:
@@ -1432,16 +1448,16 @@ def _volume_spec_unknown():
                                       spacing=None, max_dim=None)  # fmt: skip
 
 
-def _moved_spec(spec: RunSpec, evaluator, base_url, budget_usd, budget_calls, options):
+def _moved_spec(spec: RunSpec, evaluator, base_url, budget_usd, budget_calls, options, build):
     """The spec with a resume's judge changes applied, and whether the judge moved."""
+    from intuitf.session.building import resumed_judge_spec
+
+    moved = False
+    if build and spec.judge.is_model or evaluator or base_url:
+        judge_spec, moved = resumed_judge_spec(spec.judge, evaluator, base_url)
+        spec = spec.model_copy(update={"judge": judge_spec})
     j = spec.judge
     update: dict[str, Any] = {}
-    if evaluator is not None and evaluator != j.spec:
-        update["spec"] = evaluator
-    if base_url is not None and base_url != j.base_url:
-        update["base_url"] = base_url
-    if evaluator is not None and evaluator != j.spec and base_url is None:
-        update["base_url"] = None  # a new provider brings its own address
     if budget_usd is not None:
         if budget_usd < 0:
             raise SessionError(f"A budget cannot be negative (got ${budget_usd}).")
@@ -1452,9 +1468,8 @@ def _moved_spec(spec: RunSpec, evaluator, base_url, budget_usd, budget_calls, op
         update["budget_calls"] = budget_calls
     if options:
         update["options"] = {**j.options, **options}
-    moved = "spec" in update or ("base_url" in update and update["base_url"] is not None)
     if not update:
-        return spec, False
+        return spec, moved
     return spec.model_copy(update={"judge": j.model_copy(update=update)}), moved
 
 
@@ -1476,15 +1491,12 @@ def _match_dict(m) -> dict:
 
 
 def _match_stats(matches) -> dict[str, int]:
-    """Matches decided, undecided (a tie for a technical reason) and asked more than once."""
-    undecided = sum(1 for m in matches if m.verdict.error)
-    retried = sum(1 for m in matches if getattr(m.verdict, "retries", 0) or m.rechecked)
-    return {
-        "matches": len(matches),
-        "decided": len(matches) - undecided,
-        "undecided": undecided,
-        "retried": retried,
-    }
+    """Matches decided, undecided (no usable answer) and asked more than once."""
+    from intuitf.evaluator.tournament import MatchStats
+
+    st = MatchStats.of(matches)
+    return {"matches": st.matches, "decided": st.decided, "undecided": st.undecided,
+            "retried": st.retried}  # fmt: skip
 
 
 def _safe_dict(result) -> dict:

@@ -18,6 +18,10 @@ class RunSettings:
 
     ``palette_hint``: draw part of the new colours from those the intent asks for (the
     reference picture's dominant colours, the sketch's strokes, the colour words of the text).
+
+    ``material_hints``: seed part of the first population, and draw colour and height
+    mutations, from the materials the text names ("opaque ivory bone, faint red skin"),
+    placed on the volume's histogram (:mod:`intuitf.evaluator.hints`).
     """
 
     population: int = 32
@@ -35,6 +39,7 @@ class RunSettings:
     init_share: float = 0.34
     stages: list[tuple[str, int]] = field(default_factory=list)
     palette_hint: bool = True
+    material_hints: bool = True
 
     def validate(self) -> None:
         if not 4 <= self.population <= 1000:
@@ -65,6 +70,11 @@ class RunSettings:
         d["background"] = list(self.background)
         d["stages"] = [list(s) for s in self.stages]
         return d
+
+    @classmethod
+    def field_names(cls) -> set[str]:
+        """The names a settings dict may use."""
+        return {f.name for f in fields(cls)}
 
     @classmethod
     def from_dict(cls, d: dict) -> RunSettings:
