@@ -217,6 +217,12 @@ def register(app: typer.Typer) -> None:
         ),
         top: int = typer.Option(4, "--top", help="How many best TFs to keep."),
         shading: bool = typer.Option(True, "--shading/--no-shading"),
+        device: str = typer.Option(
+            "auto",
+            "--device",
+            metavar="auto|cpu|cuda",
+            help="Where to render: cuda (an NVIDIA GPU), cpu, or auto (the GPU when usable).",
+        ),
         palette: bool = typer.Option(
             True,
             "--palette/--no-palette",
@@ -283,13 +289,16 @@ def register(app: typer.Typer) -> None:
         else:
             if volume is None:
                 raise IntuitfError("Give a VOLUME to optimize (or 'phantom'), or --resume RUN_DIR.")
+            from intuitf.render.device import select_device
+
+            select_device(device)  # a missing GPU is reported before any work
             volume_spec = {"source": volume, **vo.volume_kwargs(shape, dtype, byte_order,
                                                                 spacing, max_dim)}  # fmt: skip
             settings = dict(
                 population=population, generations=generations, n_gaussians=gaussians, seed=seed,
                 explorer=explorer, protocol=protocol, image_size=size, output_size=output_size,
                 top_k=top, shading=shading, camera=_camera_dict(azimuth, elevation),
-                palette_hint=palette, material_hints=hints,
+                palette_hint=palette, material_hints=hints, device=device,
             )  # fmt: skip
             intent = _intent_spec(text, image, sketch, on, about)
             initial = [load_tf(p).to_dict() for p in start_from or []]

@@ -105,6 +105,14 @@ def render_command(
     sample_distance: Annotated[
         float, typer.Option(help="Ray step in voxels.", rich_help_panel=_VIEW)
     ] = 0.5,
+    device: Annotated[
+        str,
+        typer.Option(
+            metavar="auto|cpu|cuda",
+            help="Where to render: cuda (an NVIDIA GPU), cpu, or auto (the GPU when usable).",
+            rich_help_panel=_VIEW,
+        ),
+    ] = "auto",
     shape: vo.ShapeOpt = None,
     dtype: vo.DtypeOpt = None,
     byte_order: vo.ByteOrderOpt = None,
@@ -118,11 +126,13 @@ def render_command(
     """
     from intuitf.imageio import save_png
     from intuitf.render import Camera, VolumeRenderer
+    from intuitf.render.device import select_device
     from intuitf.tf import default_tf, load_tf
 
     console = Console(stderr=True)
     bg = parse_color(background)
     picture = parse_size(size)
+    device = select_device(device)  # a missing GPU is reported before any work
     camera = Camera(
         azimuth=azimuth,
         elevation=elevation,
@@ -138,7 +148,12 @@ def render_command(
     if tf is None:
         tf = default_tf(vol.histogram()[0], vol.value_range)
     renderer = VolumeRenderer(
-        vol, size=picture, shading=shading, background=bg, sample_distance=sample_distance
+        vol,
+        size=picture,
+        shading=shading,
+        background=bg,
+        sample_distance=sample_distance,
+        device=device,
     )
     t = time.perf_counter()
     image = renderer.render(tf, camera)

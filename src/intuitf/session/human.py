@@ -58,17 +58,30 @@ def weighted_games(verdicts: Sequence[HumanVerdict], stage_index: int) -> list:
     return out
 
 
+def stated_orders(verdicts: Sequence[HumanVerdict], stage_index: int) -> list[tuple[str, str]]:
+    """The (winner, loser) pairs a person stated in a stage, oldest first."""
+    return [
+        (w, x)
+        for v in verdicts
+        if not v.undone and v.stage_index == stage_index
+        for w, x, _ in v.games
+    ]
+
+
 def refit_ranking(
     ids: Sequence[str],
     games: Sequence[tuple[str, str, float]],
     tiebreak: Sequence[str] = (),
     anchor_weight: float = 3.0,
     initial_rating: float = 1600.0,
+    stated: Sequence[tuple[str, str]] = (),
 ) -> tuple[list[str], dict[str, float]]:
     """Ranking and ratings of ``ids`` from all ``games`` (past players join the fit).
 
     The same Bradley-Terry fit the efficient tournament uses; ties keep the order of
     ``tiebreak`` (the model's own ranking), so a fit with no new evidence changes nothing.
+    ``stated`` pairs (winner, loser) are what a person said outright: the ranking honours
+    each one (the newest wins where two disagree), moving the winner just above the loser.
     """
     from intuitf.evaluator.tournament import bradley_terry
 
@@ -87,4 +100,17 @@ def refit_ranking(
         range(len(ids)),
         key=lambda i: (-round(float(ratings[i]), 9), order_hint.get(ids[i], len(order_hint))),
     )
-    return [ids[i] for i in ranked], {ids[i]: float(ratings[i]) for i in range(len(ids))}
+    order = [ids[i] for i in ranked]
+    rating = {ids[i]: float(ratings[i]) for i in range(len(ids))}
+    # A person's word on a pair stands: newest statements last, so they win a conflict.
+    for _ in range(len(stated) + 1):
+        moved = False
+        for w, x in stated:
+            if w in rating and x in rating and order.index(w) > order.index(x):
+                order.remove(w)
+                order.insert(order.index(x), w)
+                rating[w] = max(rating[w], rating[x] + 1.0)
+                moved = True
+        if not moved:
+            break
+    return order, rating

@@ -43,7 +43,7 @@ import numpy as np
 from intuitf.errors import BudgetExhausted, IntuitfError, JudgeError, RunCancelled, SessionError
 from intuitf.evaluator.types import Aspect, Cost, Intent, Judge
 from intuitf.session.events import EventLog
-from intuitf.session.human import HumanVerdict, refit_ranking, weighted_games
+from intuitf.session.human import HumanVerdict, refit_ranking, stated_orders, weighted_games
 from intuitf.session.records import GenerationRecord, RunOutcome, SessionSnapshot
 from intuitf.session.rundir import RunDirectory
 from intuitf.session.scheduler import BATCH, INTERACTIVE, render_scheduler
@@ -171,6 +171,7 @@ class Session:
             size=settings.image_size,
             shading=settings.shading,
             background=tuple(settings.background),
+            device=settings.device,
         )
         self._views = ViewRenderer(volume, background=tuple(settings.background))
         self._cache = None
@@ -882,7 +883,10 @@ class Session:
         human = self._human_games(self._judged_stage)
         if human:
             ranking, ratings = refit_ranking(
-                ids, self._judged_games + human, tiebreak=model_ranking
+                ids,
+                self._judged_games + human,
+                tiebreak=model_ranking,
+                stated=stated_orders(self.human, self._judged_stage),
             )
         else:
             ranking, ratings = model_ranking, dict(self._model_ratings or self.ratings)
@@ -1051,7 +1055,10 @@ class Session:
             human = self._human_games()
             if human:
                 ranking, ratings = refit_ranking(
-                    ids, self.stage_games + human, tiebreak=list(result.ranking)
+                    ids,
+                    self.stage_games + human,
+                    tiebreak=list(result.ranking),
+                    stated=stated_orders(self.human, self.stage_index),
                 )
             else:
                 ranking, ratings = list(result.ranking), dict(self._model_ratings)

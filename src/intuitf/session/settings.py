@@ -39,6 +39,8 @@ class RunSettings:
     init_share: float = 0.34
     stages: list[tuple[str, int]] = field(default_factory=list)
     palette_hint: bool = True
+    #: Where rendering runs: ``auto`` (an NVIDIA GPU when usable, else the CPU), cpu, cuda.
+    device: str = "auto"
     material_hints: bool = True
 
     def validate(self) -> None:
@@ -54,6 +56,8 @@ class RunSettings:
             )
         if self.top_k < 1:
             raise SessionError("--top must be at least 1.")
+        if self.device not in ("auto", "cpu", "cuda"):
+            raise SessionError(f"--device must be auto, cpu or cuda, got {self.device!r}.")
 
     def stage_plan(self, has_intent: bool) -> list[tuple[str, int]]:
         """The (stage, generations) list this run follows."""

@@ -212,7 +212,8 @@ class RunStore:
         rd = RunDirectory(self.path_of(run))
         if not rd.exists():
             raise SessionError(f"There is no run {run!r} in {self.root}.")
-        for e in reversed(rd.generations()):
+        # The generation it was made in (an elite reappears in later ones with the same id).
+        for e in rd.generations():
             for c in e.get("candidates", []):
                 if c.get("id") == cid:
                     return CandidateInfo(
