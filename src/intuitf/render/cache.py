@@ -17,8 +17,98 @@ from intuitf.tf.gaussian import GaussianTF
 PICK_MIN_SHARE = 0.02
 
 
+def feature_shares(tf: GaussianTF, n_entries: int) -> np.ndarray:
+    """(L, N) float32: each Gaussian's part of the TF's opacity density at each LUT entry."""
+    comps = tf.components(np.linspace(0.0, 1.0, n_entries)).T  # (L, N)
+    total = comps.sum(axis=1, keepdims=True)
+    share = np.divide(comps, total, out=np.zeros_like(comps), where=total > 0)
+    return np.ascontiguousarray(share, dtype=np.float32)
+
+
+class CacheViews:
+    """What every sample cache offers on top of ``render_rgba(tf)`` and ``attribution(tf)``:
+    8-bit pictures, a whole population at once, picking and single-feature views.
+
+    Shared by the CPU :class:`SampleCache` and the GPU ``CudaSampleCache``, which override
+    :meth:`render` and :meth:`render_many` where they can do better than a loop.
+    """
+
+    renderer: VolumeRenderer
+
+    @property
+    def width(self) -> int:
+        return self.renderer.width
+
+    @property
+    def height(self) -> int:
+        return self.renderer.height
+
+    def render_rgba(self, tf: GaussianTF) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def attribution(self, tf: GaussianTF) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def render(self, tf: GaussianTF) -> np.ndarray:
+        """RGB uint8 (H, W, 3) of ``tf`` over the renderer's background."""
+        return self.renderer.to_rgb8(self.render_rgba(tf))
+
+    def render_many(self, tfs: Sequence[GaussianTF]) -> list[np.ndarray]:
+        """RGB uint8 (H, W, 3) of each TF, in order: a whole generation in one call."""
+        return [self.render(tf) for tf in tfs]
+
+    # -- feature attribution --------------------------------------------------------------
+    def pick(
+        self, tf: GaussianTF, x: int, y: int, radius: int = 0, min_share: float = PICK_MIN_SHARE
+    ) -> list[tuple[int, float]]:
+        """The Gaussians visible at pixel (x = column, y = row), or in a disc of ``radius``.
+
+        Returns ``(index, share)`` pairs, largest first, where ``share`` is the Gaussian's part
+        of the opacity accumulated there (mean over the disc's pixels; the shares sum to the
+        mean alpha, at most 1). Gaussians with a share below ``min_share`` are left out, so an
+        empty background pixel gives an empty list.
+        """
+        if not (0 <= x < self.width and 0 <= y < self.height):
+            raise RenderError(
+                f"Pixel ({x}, {y}) is outside the {self.width}×{self.height} picture.",
+                "Pick with x in [0, width) and y in [0, height), from the top-left corner.",
+            )
+        if radius < 0:
+            raise RenderError(f"The pick radius must be >= 0, got {radius}.")
+        attr = self.attribution(tf)
+        yy, xx = np.ogrid[: self.height, : self.width]
+        disc = (xx - x) ** 2 + (yy - y) ** 2 <= radius * radius
+        shares = attr[:, disc].mean(axis=1)
+        order = np.argsort(-shares, kind="stable")
+        return [(int(i), float(shares[i])) for i in order if shares[i] >= min_share]
+
+    def render_feature(
+        self, tf: GaussianTF, index: int | Sequence[int], ghost: float = 0.1
+    ) -> np.ndarray:
+        """Gaussian(s) ``index`` alone, in their own colours, over a faint grey ghost of ``tf``.
+
+        The ghost is the full rendering's luminance blended ``ghost`` of the way from the
+        background, so the feature is seen in context. uint8 (H, W, 3).
+        """
+        idx = [index] if isinstance(index, int | np.integer) else list(index)
+        if not idx or any(not 0 <= int(i) < len(tf) for i in idx):
+            raise RenderError(
+                f"Feature index {index!r} is out of range for a TF of {len(tf)} Gaussians."
+            )
+        if not 0.0 <= ghost <= 1.0:
+            raise RenderError(f"ghost must be within [0, 1], got {ghost!r}.")
+        bg = self.renderer.background.astype(np.float32)
+        full = self.render_rgba(tf)
+        full_rgb = full[..., :3] + (1.0 - full[..., 3:]) * bg
+        grey = full_rgb @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
+        layer = (1.0 - ghost) * bg + ghost * grey[..., None]
+        feature = self.render_rgba(tf.with_gaussians(tf.gaussians[int(i)] for i in idx))
+        rgb = feature[..., :3] + (1.0 - feature[..., 3:]) * layer
+        return np.clip(rgb * 255.0 + 0.5, 0, 255).astype(np.uint8)
+
+
 @dataclass(eq=False)
-class SampleCache:
+class SampleCache(CacheViews):
     """Every ray's samples for one volume, camera and picture size, quantised to the LUT.
 
     Built by :meth:`VolumeRenderer.sample_cache`. It stores, for each ray, the samples from
@@ -96,14 +186,6 @@ class SampleCache:
 
     # -- facts ----------------------------------------------------------------------------
     @property
-    def width(self) -> int:
-        return self.renderer.width
-
-    @property
-    def height(self) -> int:
-        return self.renderer.height
-
-    @property
     def n_samples(self) -> int:
         return int(self.offsets[-1])
 
@@ -144,10 +226,6 @@ class SampleCache:
         """Premultiplied RGBA float32 (H, W, 4) of ``tf``."""
         return self._composite(self.renderer.lut(tf))
 
-    def render(self, tf: GaussianTF) -> np.ndarray:
-        """RGB uint8 (H, W, 3) of ``tf`` over the renderer's background."""
-        return self.renderer.to_rgb8(self.render_rgba(tf))
-
     # -- feature attribution --------------------------------------------------------------
     def attribution(self, tf: GaussianTF) -> np.ndarray:
         """Each Gaussian's share of every pixel's opacity: float32 (N, H, W).
@@ -157,10 +235,6 @@ class SampleCache:
         pixel's alpha from :meth:`render_rgba`.
         """
         lut = self.renderer.lut(tf)
-        nl = lut.shape[0]
-        comps = tf.components(np.linspace(0.0, 1.0, nl)).T  # (L, N)
-        total = comps.sum(axis=1, keepdims=True)
-        share = np.divide(comps, total, out=np.zeros_like(comps), where=total > 0)
         occupied = np.concatenate(([0], np.cumsum(lut[:, 3] > 0))).astype(np.int64)
         out = np.zeros((self.width * self.height, len(tf)), dtype=np.float32)
         kernels.attribute(
@@ -170,56 +244,8 @@ class SampleCache:
             self.segmax,
             occupied,
             np.ascontiguousarray(lut[:, 3]),
-            np.ascontiguousarray(share, dtype=np.float32),
+            feature_shares(tf, lut.shape[0]),
             EARLY_STOP,
             out,
         )
         return np.ascontiguousarray(out.T.reshape(len(tf), self.height, self.width))
-
-    def pick(
-        self, tf: GaussianTF, x: int, y: int, radius: int = 0, min_share: float = PICK_MIN_SHARE
-    ) -> list[tuple[int, float]]:
-        """The Gaussians visible at pixel (x = column, y = row), or in a disc of ``radius``.
-
-        Returns ``(index, share)`` pairs, largest first, where ``share`` is the Gaussian's part
-        of the opacity accumulated there (mean over the disc's pixels; the shares sum to the
-        mean alpha, at most 1). Gaussians with a share below ``min_share`` are left out, so an
-        empty background pixel gives an empty list.
-        """
-        if not (0 <= x < self.width and 0 <= y < self.height):
-            raise RenderError(
-                f"Pixel ({x}, {y}) is outside the {self.width}×{self.height} picture.",
-                "Pick with x in [0, width) and y in [0, height), from the top-left corner.",
-            )
-        if radius < 0:
-            raise RenderError(f"The pick radius must be >= 0, got {radius}.")
-        attr = self.attribution(tf)
-        yy, xx = np.ogrid[: self.height, : self.width]
-        disc = (xx - x) ** 2 + (yy - y) ** 2 <= radius * radius
-        shares = attr[:, disc].mean(axis=1)
-        order = np.argsort(-shares, kind="stable")
-        return [(int(i), float(shares[i])) for i in order if shares[i] >= min_share]
-
-    def render_feature(
-        self, tf: GaussianTF, index: int | Sequence[int], ghost: float = 0.1
-    ) -> np.ndarray:
-        """Gaussian(s) ``index`` alone, in their own colours, over a faint grey ghost of ``tf``.
-
-        The ghost is the full rendering's luminance blended ``ghost`` of the way from the
-        background, so the feature is seen in context. uint8 (H, W, 3).
-        """
-        idx = [index] if isinstance(index, int | np.integer) else list(index)
-        if not idx or any(not 0 <= int(i) < len(tf) for i in idx):
-            raise RenderError(
-                f"Feature index {index!r} is out of range for a TF of {len(tf)} Gaussians."
-            )
-        if not 0.0 <= ghost <= 1.0:
-            raise RenderError(f"ghost must be within [0, 1], got {ghost!r}.")
-        bg = self.renderer.background.astype(np.float32)
-        full = self.render_rgba(tf)
-        full_rgb = full[..., :3] + (1.0 - full[..., 3:]) * bg
-        grey = full_rgb @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
-        layer = (1.0 - ghost) * bg + ghost * grey[..., None]
-        feature = self.render_rgba(tf.with_gaussians(tf.gaussians[int(i)] for i in idx))
-        rgb = feature[..., :3] + (1.0 - feature[..., 3:]) * layer
-        return np.clip(rgb * 255.0 + 0.5, 0, 255).astype(np.uint8)

@@ -10,6 +10,7 @@ import numpy as np
 from intuitf.errors import RenderError
 from intuitf.render import kernels
 from intuitf.render.camera import Camera, ViewFrame
+from intuitf.render.device import select_device
 from intuitf.tf.gaussian import GaussianTF
 from intuitf.volume.volume import Volume
 
@@ -61,7 +62,12 @@ class VolumeRenderer:
     :meth:`render` ray-marches every sample (trilinear interpolation, post-classification with
     linear LUT interpolation, front-to-back compositing, early ray termination, empty-space
     skipping over 8³ blocks). :meth:`sample_cache` samples the volume once for a camera so that
-    many TFs can be rendered cheaply (see :class:`SampleCache`).
+    many TFs can be rendered cheaply (see :class:`SampleCache`); :meth:`render_many` renders a
+    whole population through one.
+
+    ``device`` is ``"auto"`` (an NVIDIA GPU when one is usable, else the CPU), ``"cpu"`` or
+    ``"cuda"`` (the GPU or a :class:`RenderError` saying why not); :attr:`device` is the one
+    chosen. Both give the same pictures (see :mod:`intuitf.render.cuda_backend`).
     """
 
     def __init__(
@@ -76,6 +82,7 @@ class VolumeRenderer:
         diffuse: float = 0.7,
         specular: float = 0.25,
         shininess: float = 24.0,
+        device: str = "auto",
     ) -> None:
         if min(volume.dims) < 2:
             raise RenderError(
@@ -103,6 +110,9 @@ class VolumeRenderer:
         self._extent = tuple((np.asarray(volume.dims) - 1) * self._spacing)
         self._grad: np.ndarray | None = None
         self._blocks: tuple[np.ndarray, np.ndarray] | None = None
+        #: ``"cpu"`` or ``"cuda"``: where this renderer's kernels run.
+        self.device = select_device(device)
+        self._cuda = None
 
     # -- shared pieces --------------------------------------------------------------------
     @property
@@ -151,6 +161,14 @@ class VolumeRenderer:
             self._blocks = (lo, hi)
         return self._blocks
 
+    def _cuda_backend(self):
+        """The GPU state (device arrays, launch geometry), made on first use."""
+        if self._cuda is None:
+            from intuitf.render.cuda_backend import CudaBackend
+
+            self._cuda = CudaBackend(self)
+        return self._cuda
+
     def to_rgb8(self, rgba: np.ndarray) -> np.ndarray:
         """Composite premultiplied RGBA (H, W, 4) over the background: uint8 (H, W, 3)."""
         h, w = rgba.shape[:2]
@@ -168,6 +186,9 @@ class VolumeRenderer:
         interpolating between entries: the sample cache's rule, for checking it.
         """
         lut = self.lut(tf)
+        if self.device == "cuda":
+            frame = self.frame(camera)
+            return self._cuda_backend().march(lut[None], frame, nearest=nearest, to8=False)[0]
         occupied = np.concatenate(([0], np.cumsum(lut[:, 3] > 0)))
         lo, hi = self._block_ranges()
         vis = (occupied[hi + 1] > occupied[lo]).astype(np.uint8)
@@ -192,10 +213,31 @@ class VolumeRenderer:
 
     def render(self, tf: GaussianTF, camera: Camera | None = None) -> np.ndarray:
         """RGB uint8 (H, W, 3) of ``tf`` from ``camera``, composited over the background."""
+        if self.device == "cuda":
+            return self._cuda_backend().march(self.lut(tf)[None], self.frame(camera))[0]
         return self.to_rgb8(self.render_rgba(tf, camera))
 
     def sample_cache(self, camera: Camera | None = None):
-        """Sample the volume once along every ray of ``camera``: a :class:`SampleCache`."""
+        """Sample the volume once along every ray of ``camera``: a :class:`SampleCache`
+        (a ``CudaSampleCache`` in GPU memory when :attr:`device` is ``"cuda"``)."""
+        if self.device == "cuda":
+            from intuitf.render.cuda_backend import CudaSampleCache
+
+            return CudaSampleCache.build(self, camera or Camera())
         from intuitf.render.cache import SampleCache
 
         return SampleCache.build(self, camera or Camera())
+
+    def render_many(
+        self, tfs: Sequence[GaussianTF], camera: Camera | None = None
+    ) -> list[np.ndarray]:
+        """RGB uint8 (H, W, 3) of each TF from ``camera``: a population in one call.
+
+        Samples the volume once for the camera and renders every TF from that (on the GPU in
+        one launch). To render more TFs from the same camera later, keep
+        ``cache = renderer.sample_cache(camera)`` and call ``cache.render_many(tfs)``.
+        """
+        tfs = list(tfs)
+        if not tfs:
+            return []
+        return self.sample_cache(camera).render_many(tfs)

@@ -1,0 +1,237 @@
+"""The CUDA backend, checked without a GPU.
+
+CI has no GPU, so the CUDA kernels run under Numba's CUDA simulator, which executes them as
+Python on the CPU. The simulator must be switched on before ``numba.cuda`` is first imported,
+and this test process has imported it already (or may), so the checks run in a subprocess:
+this file executed as a script with ``NUMBA_ENABLE_CUDASIM=1``. On tiny volumes and pictures
+the CUDA kernels' pictures, attribution and picks are compared with the CPU kernels'. A
+change that breaks the CUDA kernels fails here, never skips. The full-size agreement and
+speed are measured on a GPU machine by ``benchmarks/render.py --device cuda``.
+
+The other tests check device selection where there is no GPU: ``auto`` falls back to the CPU
+silently, ``cuda`` is a one-line error with a hint (from the API and from the command line).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from intuitf.errors import IntuitfError, RenderError
+from intuitf.render.device import cuda_unavailable_reason, select_device
+
+
+def test_cuda_kernels_agree_with_the_cpu_kernels_under_the_simulator():
+    env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1")
+    proc = subprocess.run(
+        [sys.executable, __file__], env=env, capture_output=True, text=True, timeout=900
+    )
+    report = proc.stdout[-6000:] + proc.stderr[-6000:]
+    assert proc.returncode == 0, report
+    assert "simulator checks passed" in proc.stdout, report
+
+
+def test_auto_uses_the_cpu_where_no_gpu_is_usable():
+    expected = "cpu" if cuda_unavailable_reason() is not None else "cuda"
+    assert select_device("auto") == expected
+    assert select_device("cpu") == "cpu"
+    with pytest.raises(RenderError, match="Unknown render device"):
+        select_device("tpu")
+
+
+def test_asking_for_cuda_without_a_gpu_is_a_clear_error():
+    if cuda_unavailable_reason() is None:
+        pytest.skip("a GPU is usable here")
+    with pytest.raises(RenderError) as exc:
+        select_device("cuda")
+    assert "no NVIDIA GPU can be used here" in exc.value.message
+    assert "\n" not in exc.value.message
+    assert "--device cpu" in exc.value.hint and "intuitf[cuda]" in exc.value.hint
+
+
+def test_render_command_with_device_cuda_and_no_gpu_says_so_in_one_line(tmp_path, capsys):
+    if cuda_unavailable_reason() is None:
+        pytest.skip("a GPU is usable here")
+    from intuitf.cli.app import main
+
+    out = tmp_path / "p.png"
+    with pytest.raises(SystemExit) as exc:
+        main(["render", "phantom", "--size", "32", "--device", "cuda", "-o", str(out)])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "no NVIDIA GPU can be used here" in err and "Traceback" not in err
+    assert not out.exists()
+    main(["render", "phantom", "--size", "32", "--device", "auto", "-o", str(out)])
+    assert out.exists()
+
+
+def test_run_settings_take_a_device():
+    from intuitf.session.settings import RunSettings
+
+    assert RunSettings().device == "auto"
+    RunSettings(device="cpu").validate()
+    with pytest.raises(IntuitfError, match="--device"):
+        RunSettings(device="gpu").validate()
+    assert RunSettings.from_dict(RunSettings(device="cuda").to_dict()).device == "cuda"
+
+
+# ---------------------------------------------------------------------------------------------
+# Run as a script under the simulator
+# ---------------------------------------------------------------------------------------------
+def _volumes():
+    from intuitf.volume import Volume
+
+    rng = np.random.default_rng(3)
+    z, y, x = np.meshgrid(*(np.linspace(-1, 1, n) for n in (14, 13, 12)), indexing="ij")
+    r = np.sqrt(x**2 + (1.2 * y) ** 2 + (0.9 * z) ** 2)
+    shell = np.clip(1.0 - np.abs(r - 0.75) * 6, 0, 1) * 200
+    core = np.clip(1.0 - r * 2.2, 0, 1) * 120 + 40 * (x > 0.3)
+    u8 = np.clip(shell + core + rng.normal(0, 6, r.shape), 0, 255).astype(np.uint8)
+    yield Volume.from_array(u8, spacing=(1.0, 1.2, 0.8), name="u8-12x13x14")
+    # 16-bit values: more than 256 LUT entries, so uint16 samples in the cache.
+    u16 = (u8.astype(np.uint16) * 7 + rng.integers(0, 7, u8.shape)).astype(np.uint16)
+    yield Volume.from_array(u16[:12, :12, :12].copy(), name="u16-12^3")
+
+
+def _tfs(n: int, seed: int):
+    from intuitf.tf import Gaussian, GaussianTF
+
+    rng = np.random.default_rng(seed)
+    return [
+        GaussianTF(
+            tuple(
+                Gaussian(
+                    mean=float(rng.uniform(0.1, 0.95)),
+                    width=float(rng.uniform(0.03, 0.15)),
+                    height=float(rng.uniform(0.05, 0.9)),
+                    color=tuple(float(c) for c in rng.uniform(0, 1, 3)),
+                )
+                for _ in range(3)
+            )
+        )
+        for _ in range(n)
+    ]
+
+
+def _simulator_checks() -> None:
+    from numba.core import config
+
+    assert config.ENABLE_CUDASIM, "run with NUMBA_ENABLE_CUDASIM=1 set before numba is imported"
+    from intuitf.render import Camera, VolumeRenderer
+    from intuitf.render.cuda_backend import CudaSampleCache
+    from intuitf.tf import Gaussian, GaussianTF
+
+    assert select_device("cuda") == "cuda"
+    assert select_device("auto") == "cpu", "auto must never pick the simulator"
+
+    failures: list[str] = []
+
+    def check(ok: bool, what: str) -> None:
+        print(("ok   " if ok else "FAIL ") + what)
+        if not ok:
+            failures.append(what)
+
+    def rgb_close(name: str, a: np.ndarray, b: np.ndarray, max_levels: int = 2) -> None:
+        d = np.abs(a.astype(np.int16) - b.astype(np.int16))
+        mse = float(np.mean(d.astype(np.float64) ** 2))
+        psnr = 99.0 if mse == 0 else 10 * np.log10(255.0**2 / mse)
+        ok = a.shape == b.shape and d.mean() < 0.5 and psnr > 40 and d.max() <= max_levels
+        check(ok, f"{name}: mean {d.mean():.3f}/255, max {d.max()}, PSNR {psnr:.1f} dB")
+
+    def float_close(name: str, a: np.ndarray, b: np.ndarray, tol: float = 4e-3) -> None:
+        # float32 on the GPU, float64 in parts of the CPU kernels: a value on a rounding
+        # boundary may land on the neighbouring LUT entry, moving a pixel by well under 1/255.
+        d = np.abs(a - b)
+        ok = a.shape == b.shape and d.max() < tol and d.mean() < 2e-4
+        check(ok, f"{name}: max |diff| {d.max():.2e}, mean {d.mean():.1e}")
+
+    cameras = {
+        "orthographic": Camera(azimuth=30, elevation=20, projection="orthographic"),
+        "perspective": Camera(azimuth=-65, elevation=35, roll=10, zoom=1.3, pan=(0.05, -0.1)),
+    }
+    sizes = {"orthographic": 16, "perspective": (13, 10)}  # 13×10: partial 8×4 tiles
+    invisible = GaussianTF((Gaussian(mean=0.99, width=0.002, height=1e-9, color=(1, 0, 0)),))
+    for vol in _volumes():
+        for cam_name, cam in cameras.items():
+            for shading in (False, True):
+                tag = f"{vol.name} {cam_name} {'shaded' if shading else 'unshaded'}"
+                kw = dict(size=sizes[cam_name], shading=shading, background=(0.1, 0.2, 0.3))
+                cpu = VolumeRenderer(vol, device="cpu", **kw)
+                gpu = VolumeRenderer(vol, device="cuda", **kw)
+                check(gpu.device == "cuda" and cpu.device == "cpu", f"{tag}: devices")
+                tfs = _tfs(3, seed=len(tag))
+                # Direct ray marching: float RGBA and 8-bit, interpolated and nearest LUT.
+                float_close(
+                    f"{tag} march rgba", gpu.render_rgba(tfs[0], cam), cpu.render_rgba(tfs[0], cam)
+                )
+                float_close(
+                    f"{tag} march nearest",
+                    gpu.render_rgba(tfs[1], cam, nearest=True),
+                    cpu.render_rgba(tfs[1], cam, nearest=True),
+                )
+                rgb_close(f"{tag} march rgb8", gpu.render(tfs[2], cam), cpu.render(tfs[2], cam))
+                empty = gpu.render(invisible, cam)
+                check(
+                    bool(
+                        np.all(empty == empty[0, 0]) and np.all(empty == cpu.render(invisible, cam))
+                    ),
+                    f"{tag}: invisible TF gives the background",
+                )
+                # Sample cache: same samples, a population in one launch.
+                gc = gpu.sample_cache(cam)
+                cc = cpu.sample_cache(cam)
+                check(isinstance(gc, CudaSampleCache), f"{tag}: GPU cache type")
+                check(
+                    abs(gc.n_samples - cc.n_samples) <= max(2, cc.n_samples // 200),
+                    f"{tag}: samples {gc.n_samples} (GPU) vs {cc.n_samples} (CPU)",
+                )
+                check(gc.samples.dtype == cc.samples.dtype, f"{tag}: sample dtype")
+                many = gc.render_many(tfs)
+                check(len(many) == 3, f"{tag}: render_many returns one picture per TF")
+                for k, (img, tf) in enumerate(zip(many, tfs, strict=True)):
+                    rgb_close(f"{tag} cache candidate {k}", img, cc.render(tf))
+                    check(np.array_equal(img, gc.render(tf)), f"{tag}: batch = single ({k})")
+                float_close(f"{tag} cache rgba", gc.render_rgba(tfs[1]), cc.render_rgba(tfs[1]))
+                float_close(
+                    f"{tag} cache vs march nearest",
+                    gc.render_rgba(tfs[2]),
+                    gpu.render_rgba(tfs[2], cam, nearest=True),
+                    tol=6e-3 if shading else 4e-3,  # shading terms rounded to 1/255
+                )
+                rmany = gpu.render_many(tfs, cam)
+                check(
+                    all(np.array_equal(a, b) for a, b in zip(rmany, many, strict=True)),
+                    f"{tag}: renderer.render_many",
+                )
+                # Attribution, picking and feature views.
+                ga = gc.attribution(tfs[0])
+                ca = cc.attribution(tfs[0])
+                float_close(f"{tag} attribution", ga, ca)
+                alpha = cc.render_rgba(tfs[0])[..., 3]
+                ys, xs = np.nonzero(alpha > 0.05)
+                at = np.linspace(0, len(xs) - 1, 6).astype(int) if len(xs) else []
+                for x, y in [(int(xs[i]), int(ys[i])) for i in at] + [(0, 0)]:
+                    for radius in (0, 2):
+                        pg = gc.pick(tfs[0], x, y, radius=radius)
+                        pc = cc.pick(tfs[0], x, y, radius=radius)
+                        same = [i for i, _ in pg] == [i for i, _ in pc] and all(
+                            abs(a - b) < 1e-3 for (_, a), (_, b) in zip(pg, pc, strict=True)
+                        )
+                        check(same, f"{tag}: pick ({x}, {y}) r={radius}: {pg} vs {pc}")
+                rgb_close(
+                    f"{tag} feature view",
+                    gc.render_feature(tfs[0], [0, 2]),
+                    cc.render_feature(tfs[0], [0, 2]),
+                )
+    if failures:
+        print(f"{len(failures)} simulator check(s) failed")
+        sys.exit(1)
+    print("simulator checks passed")
+
+
+if __name__ == "__main__":
+    _simulator_checks()
