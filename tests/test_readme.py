@@ -28,3 +28,12 @@ def test_python_api_example_runs(capsys):
     assert out.startswith("completed ")
     assert "(256, 256, 3)" in out
     assert "intuitf.gaussian-tf" in out
+
+
+def test_service_example_runs(tmp_path, monkeypatch, capsys):
+    (code,) = [b for b in _blocks("python") if "RunSpec" in b]
+    monkeypatch.chdir(tmp_path)
+    exec(compile(code, "README.md", "exec"), {})
+    out = capsys.readouterr().out
+    assert "run_ended" in out
+    assert "('demo-api', 'completed'), ('demo-api-2', 'completed')" in out
