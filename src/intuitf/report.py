@@ -229,19 +229,53 @@ def _gaussian_table(tf: dict) -> str:
     )
 
 
+def _match_stats(c: RunContents):
+    from intuitf.evaluator.tournament import MatchStats
+
+    return MatchStats.from_journal(c.generations)
+
+
 def _costs(c: RunContents) -> list[tuple[str, Any]]:
     def total(key: str) -> float:
         return sum(float(e.get(key) or 0) for e in c.generations)
 
+    # The end entry's cost comes from the verdict store: every paid request, also those of an
+    # interrupted generation, which no generation entry holds.
+    end_cost = c.end.get("cost") if c.end and isinstance(c.end.get("cost"), dict) else {}
+
+    def paid(key: str, end_key: str | None = None) -> float:
+        try:
+            at_end = float(end_cost.get(end_key or key) or 0)
+        except (TypeError, ValueError):
+            at_end = 0.0
+        return max(total(key), at_end)
+
     rows: list[tuple[str, Any]] = [
         ("generations", len(c.generations)),
-        ("judge calls", int(total("calls"))),
+        ("judge calls", int(paid("calls"))),
         ("answered from cache", int(total("cached_calls"))),
-        ("input tokens", int(total("input_tokens"))),
-        ("output tokens", int(total("output_tokens"))),
-        ("cost (USD)", f"${total('cost_usd'):.4f}"),
+        ("input tokens", int(paid("input_tokens"))),
+        ("output tokens", int(paid("output_tokens"))),
+        ("cost (USD)", f"${paid('cost_usd', 'usd'):.4f}"),
         ("time", f"{total('seconds'):.1f} s"),
     ]
+    stats = _match_stats(c)
+    if stats.matches:
+        rows.append(
+            (
+                "matches",
+                f"{stats.matches}: {stats.decided} decided, {stats.undecided} undecided, "
+                f"{stats.retried} asked again",
+            )
+        )
+    judges = c.run.get("judges")
+    if isinstance(judges, list) and len(judges) > 1:
+        for j in judges:
+            if isinstance(j, dict):
+                who = j.get("evaluator") or j.get("judge") or "?"
+                if j.get("base_url"):
+                    who = f"{who} at {j['base_url']}"
+                rows.append((f"judge from gen {int(j.get('from_generation', 0)) + 1}", who))
     if c.end:
         rows.append(
             ("ended", f"{c.end.get('reason', '?')}: {c.end.get('message', '')}".strip(": "))
@@ -284,6 +318,7 @@ a.dl { display:inline-block; margin:0 6px 6px 0; padding:3px 10px; border:1px so
 a.dl:hover { background:var(--acc); color:#fff; }
 details { margin:8px 0; } summary { cursor:pointer; color:var(--ink); padding:4px 0; }
 .note { color:var(--muted); font-size:12px; }
+.warn { background:#fff4d6; border:1px solid #e6c65c; border-radius:6px; padding:8px 12px; }
 """
 
 
@@ -328,6 +363,9 @@ def report_html(c: RunContents) -> str:
         f"<div><h3 class='note'>Cost</h3>{_table(_costs(c))}</div>",
         "</div>",
     ]
+    warning = _match_stats(c).warning
+    if warning:
+        parts.append(f'<p class="warn"><strong>Warning:</strong> {html.escape(warning)}</p>')
     if run.get("created"):
         parts.append(f'<p class="note">Started {_e(run.get("created"))}.</p>')
     if isinstance(run.get("versions"), dict) and run["versions"]:

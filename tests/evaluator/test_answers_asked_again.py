@@ -145,3 +145,27 @@ def test_fault_storm_leaves_at_most_5_percent_of_matches_undecided(oracle_images
     assert stats.retried > 0
     assert stats.undecided_share <= 0.05, stats
     assert stats.warning is None
+
+
+def test_the_report_shows_decided_and_undecided_matches_and_warns(tmp_path):
+    import json
+
+    from intuitf.report import collect_run, report_html
+
+    gens = [
+        {"type": "generation", "generation": 0, "stage": "customize", "calls": 40,
+         "decided": 36, "undecided": 4, "retried": 7, "candidates": [], "matches": []},
+        {"type": "generation", "generation": 1, "stage": "customize", "calls": 40,
+         "decided": 39, "undecided": 1, "retried": 2, "candidates": [], "matches": []},
+    ]  # fmt: skip
+    end = {"type": "end", "reason": "budget", "message": "spent", "cost": {"calls": 95}}
+    (tmp_path / "run.json").write_text(json.dumps({"settings": {}}))
+    (tmp_path / "journal.jsonl").write_text("".join(json.dumps(e) + "\n" for e in [*gens, end]))
+    page = report_html(collect_run(tmp_path))
+    assert "80: 75 decided, 5 undecided, 9 asked again" in page
+    assert "Warning:" in page and "5 of 80 matches (6 %) stayed undecided" in page
+    # The paid calls are the verdict store's (end entry): also the interrupted generation's.
+    assert "<th>judge calls</th><td>95</td>" in page
+    gens[0]["undecided"], gens[0]["decided"] = 0, 40
+    (tmp_path / "journal.jsonl").write_text("".join(json.dumps(e) + "\n" for e in gens))
+    assert "Warning:" not in report_html(collect_run(tmp_path))
