@@ -173,7 +173,9 @@ class Session:
             background=tuple(settings.background),
             device=settings.device,
         )
-        self._views = ViewRenderer(volume, background=tuple(settings.background))
+        self._views = ViewRenderer(
+            volume, background=tuple(settings.background), device=settings.device
+        )
         self._cache = None
         self._images: dict[str, np.ndarray] = {}
         self.records: list[GenerationRecord] = []

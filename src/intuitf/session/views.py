@@ -37,9 +37,10 @@ class PickResult:
 class ViewRenderer:
     """Renders of one volume for interaction, cached per size, shading and camera."""
 
-    def __init__(self, volume, background=(0.0, 0.0, 0.0)) -> None:
+    def __init__(self, volume, background=(0.0, 0.0, 0.0), device: str = "auto") -> None:
         self.volume = volume
         self.background = tuple(background)
+        self.device = device
         self._renderers: dict[tuple[int, bool], object] = {}
         self._cache_key = None
         self._cache = None
@@ -52,7 +53,11 @@ class ViewRenderer:
             r = self._renderers.get((size, shading))
             if r is None:
                 r = VolumeRenderer(
-                    self.volume, size=size, shading=shading, background=self.background
+                    self.volume,
+                    size=size,
+                    shading=shading,
+                    background=self.background,
+                    device=self.device,
                 )
                 self._renderers[(size, shading)] = r
             return r
