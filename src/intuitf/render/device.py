@@ -22,7 +22,7 @@ DEVICES = ("auto", "cpu", "cuda")
 
 def _first_line(text: object) -> str:
     for line in str(text).splitlines():
-        line = line.strip().rstrip(":").strip()
+        line = line.strip().rstrip(":.").strip()
         if line and not line.lower().startswith("error at driver init"):
             return line
     return ""
