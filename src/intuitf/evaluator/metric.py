@@ -2,6 +2,9 @@
 
 It is the embedded default so that everything runs without a model, and it is a *baseline*:
 it measures a few things that can be measured honestly and calls every other aspect a tie.
+Its quality measures prefer what people prefer: clear structure over haze, speckle, a blank
+picture, one opaque shell or washed-out colours (:mod:`intuitf.evaluator.metric_quality`;
+checked on the labelled pairs of real renderings in ``tests/data/judge_pairs``).
 
 What it measures (per image, on the *foreground*: pixels whose colour differs from the
 background, estimated as the median colour of the image border):
@@ -9,14 +12,18 @@ background, estimated as the median colour of the image border):
 =============================  ===========================================================
 aspect key                     measure (higher is better unless noted)
 =============================  ===========================================================
-``information_richness``       the paper's information-entropy baseline: Shannon entropy
-                               (bits) of the foreground's quantised colour histogram, times
-                               the foreground coverage's square root so that a speck of varied
-                               colour does not beat a fully visible object (0 below 0.5 %)
-``feature_discrimination``     colour variety: entropy of the foreground's chroma (CIELAB
-                               a*, b*) histogram, plus luminance contrast (std of L*, /100)
+``information_richness``       entropy (bits) of the colours of what is clearly shown, times
+                               the square root of its coverage, times its clarity (no grey
+                               veil over empty space, no speckle) and colour separation
+                               (see :mod:`~intuitf.evaluator.metric_quality`); 0 for a blank
+                               picture. Aspect keys naming "entropy" get the paper's plain
+                               information-entropy baseline instead.
+``feature_discrimination``     colour separation of the clearly shown materials (CIELAB a*b*
+                               spread) plus crispness of their boundaries, times clarity
 ``color_content_harmony``      not judged (tie): harmony is taste, not a statistic
-``text_alignment``             only what a text says checkably: named colours ("red", "ivory",
+``text_alignment``             (times 0.5 + 0.5 clarity: haze and speckle count against a
+                               rendering whatever it shows) only what a text says checkably:
+                               named colours ("red", "ivory",
                                "bone white", ...) must cover part of the foreground (share of
                                foreground pixels within ΔE 25 of each, saturating at 5 %);
                                "opaque" / "semi-opaque" / "transparent" / "faint" against the
@@ -63,6 +70,7 @@ from skimage.color import rgb2lab
 from skimage.metrics import structural_similarity
 from skimage.transform import resize
 
+from intuitf.evaluator.metric_quality import Quality, quality
 from intuitf.evaluator.types import Aspect, Choice, Cost, Intent, Verdict, weighted_overall
 
 #: Colour names a text may use, as sRGB (0-255). Multi-word names are matched first.
@@ -143,6 +151,7 @@ class _Features:
     lab_hist: np.ndarray  # normalised coarse Lab histogram of the foreground
     mean_lab: np.ndarray
     gray128: np.ndarray  # luminance in [0, 1], 128 x 128
+    quality: Quality  # clarity, separation, richness, discrimination (metric_quality)
 
 
 def _digest(arr: np.ndarray) -> str:
@@ -206,7 +215,7 @@ def _features(image: np.ndarray) -> _Features:
     gray128 = resize(lab[..., 0] / 100.0, (128, 128), anti_aliasing=True).astype(np.float64)
     return _Features(
         lab, fg, bg_lab, coverage, float(entropy), float(variety), contrast, opacity,
-        lab_hist, mean_lab, gray128,
+        lab_hist, mean_lab, gray128, quality(rgb),
     )  # fmt: skip
 
 
@@ -234,6 +243,8 @@ def _resize_like(arr: np.ndarray, shape: tuple[int, int], order: int) -> np.ndar
 
 #: Differences below these count as a tie, per measure (in the measure's own units).
 _TIE_TOLERANCE = {
+    "richness": 0.02,
+    "discrimination": 0.02,
     "entropy": 0.02,  # bits
     "variety": 0.02,  # bits
     "contrast": 0.005,
@@ -295,6 +306,8 @@ class MetricJudge:
                 rationale[aspect.key] = f"not measurable by the metric judge ({aspect.key})"
                 continue
             tol = _TIE_TOLERANCE.get(measure, 0.01)
+            if measure in _RELATIVE:
+                tol *= max(abs(sa), abs(sb))
             if sa > sb + tol:
                 choice = Choice.FIRST
             elif sb > sa + tol:
@@ -364,7 +377,11 @@ class MetricJudge:
             parts.append(min(1.0, f.variety / 6.0))
         if _CONTRAST_RE.search(text):
             parts.append(min(1.0, f.contrast * 3.0))
-        return float(np.mean(parts)) if parts else None
+        if not parts:
+            return None
+        # "Judged together with its visual quality": a veil or speckle counts against a
+        # rendering however well its colours match the words.
+        return float(np.mean(parts)) * (0.5 + 0.5 * f.quality.clarity)
 
     def _ref_colour(self, f: _Features, intent: Intent) -> float | None:
         if intent.reference is None:
@@ -484,7 +501,12 @@ def _strokes(intent: Intent, shape: tuple[int, int]) -> tuple[np.ndarray | None,
     return alpha, rgb2lab(rgb).astype(np.float32)
 
 
+#: Measures whose tie tolerance is relative (a share of the larger score).
+_RELATIVE = {"richness", "discrimination"}
+
 _SCORERS: dict[str, Callable[[MetricJudge, _Features, Intent], float | None]] = {
+    "richness": lambda j, f, i: f.quality.richness,
+    "discrimination": lambda j, f, i: f.quality.discrimination,
     "entropy": lambda j, f, i: f.entropy,
     "variety": lambda j, f, i: f.variety + f.contrast if f.coverage > 0 else 0.0,
     "contrast": lambda j, f, i: f.contrast,
@@ -497,8 +519,8 @@ _SCORERS: dict[str, Callable[[MetricJudge, _Features, Intent], float | None]] = 
 }
 
 _KNOWN_KEYS = {
-    "information_richness": "entropy",
-    "feature_discrimination": "variety",
+    "information_richness": "richness",
+    "feature_discrimination": "discrimination",
     "color_content_harmony": None,
     "text_alignment": "text",
     "color_style_matching": "ref_colour",
@@ -520,10 +542,10 @@ _KEYWORDS = [
     ("colour_style", "ref_colour"),
     ("color_style", "ref_colour"),
     ("structur", "ref_structure"),
-    ("richness", "entropy"),
-    ("information", "entropy"),
     ("entropy", "entropy"),
-    ("discrimination", "variety"),
+    ("richness", "richness"),
+    ("information", "richness"),
+    ("discrimination", "discrimination"),
     ("contrast", "contrast"),
     ("text", "text"),
 ]

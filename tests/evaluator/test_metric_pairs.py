@@ -1,0 +1,93 @@
+"""The offline judge on labelled pairs of real renderings: clean beats haze, noise, blank, shell.
+
+The pairs (``tests/data/judge_pairs``, built by ``benchmarks/judge_pairs.py build``) are
+renderings of six real volumes (foot, head, tooth, engine, bonsai, carp); in each, one side is
+a clean transfer function and the other the same one spoilt: a grey veil over the volume's box
+(haze), speckle from the noise above the background, next to nothing shown (blank), the
+outermost material as one opaque shell, or washed-out colours. The paper's entropy baseline
+agreed with these labels on 0.62 of them (haze 0.50, noise 0.08, shell 0.50).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from intuitf.evaluator.aspects import aspects_for
+from intuitf.evaluator.metric import MetricJudge
+from intuitf.evaluator.metric_quality import quality
+from intuitf.evaluator.types import Choice, Intent
+from intuitf.imageio import load_image
+
+PAIRS = Path(__file__).resolve().parents[1] / "data" / "judge_pairs"
+
+
+def _pairs():
+    labels = json.loads((PAIRS / "labels.json").read_text())
+    return [
+        (p, load_image(PAIRS / p["first"]), load_image(PAIRS / p["second"]))
+        for p in labels["pairs"]
+    ]
+
+
+def _hit(verdict, better: str) -> float:
+    score = verdict.overall.score  # 1 first, 0.5 tie, 0 second
+    return score if better == "first" else 1.0 - score
+
+
+def test_labelled_pairs_agreement():
+    judge = MetricJudge()
+    quality_aspects = aspects_for("quality")
+    by_kind: dict[str, list[float]] = {}
+    for p, a, b in _pairs():
+        v = asyncio.run(judge.compare(a, b, quality_aspects, Intent()))
+        by_kind.setdefault(p["kind"], []).append(_hit(v, p["better"]))
+    agreement = {k: float(np.mean(v)) for k, v in by_kind.items()}
+    overall = float(np.mean([h for v in by_kind.values() for h in v]))
+    assert set(agreement) == {"haze", "noise", "blank", "shell", "washed"}
+    assert len(by_kind["haze"]) == 6  # six volumes
+    # Measured 0.98 (shell 0.92); the entropy baseline reached 0.62.
+    assert overall >= 0.9, agreement
+    for kind in ("haze", "noise", "blank", "washed"):
+        assert agreement[kind] == 1.0, agreement
+    assert agreement["shell"] >= 0.75, agreement
+
+
+def test_order_does_not_matter():
+    judge = MetricJudge()
+    asp = aspects_for("quality")
+    for _p, a, b in _pairs()[:10]:
+        v1 = asyncio.run(judge.compare(a, b, asp, Intent()))
+        v2 = asyncio.run(judge.compare(b, a, asp, Intent()))
+        assert v1.overall == v2.overall.swapped()
+
+
+def test_haze_is_a_veil_and_noise_is_grain():
+    clean = quality(load_image(PAIRS / "engine_clean.png"))
+    haze = quality(load_image(PAIRS / "engine_haze.png"))
+    noise = quality(load_image(PAIRS / "engine_noise.png"))
+    blank = quality(load_image(PAIRS / "engine_blank.png"))
+    assert haze.veil > 0.4 > 0.1 > clean.veil
+    assert noise.grain > clean.grain + 0.3
+    assert clean.clarity > 4 * max(haze.clarity, noise.clarity)
+    assert blank.richness == blank.discrimination == 0.0
+
+
+@pytest.mark.parametrize("volume", ["foot", "head", "tooth"])
+def test_text_alignment_counts_haze_against_a_rendering(volume):
+    """With the same colours on show, the hazy rendering loses on the text aspect too."""
+    text = {
+        "foot": "faint red skin, opaque ivory bone",
+        "head": "faint red skin, opaque ivory bone",
+        "tooth": "ivory dentin, opaque blue crown",
+    }[volume]
+    clean = load_image(PAIRS / f"{volume}_clean.png")
+    haze = load_image(PAIRS / f"{volume}_haze.png")
+    v = asyncio.run(
+        MetricJudge().compare(clean, haze, aspects_for("text"), Intent(kind="text", text=text))
+    )
+    assert v.overall is Choice.FIRST, v.rationale
