@@ -1,0 +1,65 @@
+"""Small helpers shared by the Session's modules."""
+
+from __future__ import annotations
+
+from intuitf.evaluator.types import Cost, Intent
+from intuitf.session.rundir import RunDirectory
+from intuitf.session.settings import RunSettings
+
+
+def _palette_hint(intent: Intent, settings: RunSettings) -> list[tuple[float, float, float]]:
+    """The colours the intent asks for, as a hint for the explorer (see ``RunSettings``)."""
+    if not settings.palette_hint:
+        return []
+    from intuitf.evaluator.palette import intent_palette
+
+    return intent_palette(intent, background=tuple(settings.background))
+
+
+def _material_hints(intent: Intent, settings: RunSettings, volume) -> list[dict]:
+    """The materials the intent's words name, placed on the volume (see ``RunSettings``)."""
+    if not getattr(settings, "material_hints", True):
+        return []
+    from intuitf.evaluator.hints import explorer_hints
+
+    return explorer_hints(intent, volume)
+
+
+def _with_selection(intent: Intent, volume, initial, settings: RunSettings) -> Intent:
+    """An edit intent with its base rendering and the mask of the selected features' pixels."""
+    if intent.kind != "edit" or len(initial) != 1:
+        return intent
+    from intuitf.evaluator.selection import edit_intent
+
+    return edit_intent(intent, volume, initial[0], settings)
+
+
+def _judge_name(judge) -> str:
+    name = getattr(judge, "name", type(judge).__name__)
+    try:
+        from intuitf.evaluator.providers import redact_url
+    except ImportError:  # pragma: no cover - older evaluator without the helper
+        return str(name)
+    return redact_url(str(name))
+
+
+def _paid(judge, cost: Cost, rd: RunDirectory | None) -> Cost:
+    """``cost`` with calls, tokens and money as the run's verdict store recorded them (exact
+    across resumes and kills), when the judge keeps its answers there."""
+    from intuitf.evaluator.budget import run_spend, with_spend
+
+    if rd is None:
+        return cost
+    return with_spend(cost, run_spend(judge, rd.verdicts))
+
+
+def _intent_record(intent: Intent) -> dict:
+    return {
+        "kind": intent.kind,
+        "text": intent.text,
+        "about": intent.about,
+        "selected": list(intent.selected),
+        "has_reference": intent.reference is not None,
+        "has_sketch": intent.sketch is not None,
+        "has_base": intent.base is not None,
+    }

@@ -1,0 +1,526 @@
+"""How a Session comes to be: from a spec, from in-memory objects, from a run folder, or as a
+branch of another run. A mixin of :class:`~intuitf.session.session.Session`."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from intuitf.errors import SessionError
+from intuitf.evaluator.types import Cost, Intent, Judge
+from intuitf.session.events import EventLog
+from intuitf.session.helpers import (
+    _intent_record,
+    _judge_name,
+    _material_hints,
+    _paid,
+    _palette_hint,
+    _with_selection,
+)
+from intuitf.session.human import HumanVerdict
+from intuitf.session.rundir import RunDirectory
+from intuitf.session.settings import RunSettings
+from intuitf.session.spec import RunSpec, parse_spec
+from intuitf.tf import GaussianTF
+
+if TYPE_CHECKING:
+    from intuitf.session.session import Session
+from intuitf.volume import Volume
+
+
+class SessionOpening:
+    """Constructors of :class:`Session` (open, create, refine, resume, branch)."""
+
+    # -- construction ---------------------------------------------------------------------
+    @classmethod
+    def open(
+        cls,
+        spec: RunSpec | dict,
+        run_dir: str | Path | None,
+        *,
+        overwrite: bool = False,
+        judge: Judge | None = None,
+        volume: Volume | None = None,
+    ) -> Session:
+        """Start the run ``spec`` describes in ``run_dir`` (None: in memory).
+
+        Builds the volume, the judge (with its verdict store in the run folder and its
+        budget), the intent (its pictures copied into the run folder) and the Explorer. A
+        ``judge`` or ``volume`` given here is used instead of building one (tests, notebooks).
+        """
+        from intuitf.session.building import build_judge, copy_intent_pictures, load_intent
+        from intuitf.session.lock import RunLock
+
+        spec = parse_spec(spec)
+        settings = spec.run_settings()
+        rd = RunDirectory(run_dir) if run_dir is not None else None
+        lock = None
+        created = False
+        if rd is not None:
+            if rd.exists() and not overwrite:
+                raise SessionError(
+                    f"{rd.root} already holds a run.",
+                    f"Continue it with --resume {rd.root}, or pick another folder "
+                    "(-o) or --overwrite.",
+                )
+            created = not rd.root.exists()
+            rd.root.mkdir(parents=True, exist_ok=True)
+            lock = RunLock(rd.root)
+            lock.acquire()
+        try:
+            vol = volume if volume is not None else spec.volume.load()
+            if rd is not None:
+                spec = copy_intent_pictures(spec, rd.root)
+            intent = load_intent(spec.intent, rd.root if rd is not None else None)
+            initial = [GaussianTF.from_dict(d) for d in spec.initial]
+            if judge is None:
+                judge = build_judge(spec.judge, rd.root if rd else None, settings.protocol)
+            if spec.intent.kind == "edit":
+                if len(initial) != 1:
+                    raise SessionError(
+                        "A refinement starts from exactly one transfer function.",
+                        "Give the TF to refine as the spec's only 'initial' entry.",
+                    )
+                sess = cls._refine_from(
+                    vol, initial[0], intent, judge, settings, rd, spec, overwrite, lock
+                )
+            else:
+                sess = cls._new(vol, intent, judge, settings, rd, initial, overwrite, spec, lock)
+        except BaseException:
+            if lock is not None:
+                lock.release()
+            if created and rd is not None and not rd.exists():
+                import shutil
+
+                shutil.rmtree(rd.root, ignore_errors=True)
+            raise
+        return sess
+
+    @classmethod
+    def create(
+        cls,
+        volume: Volume,
+        *,
+        intent: Intent | None = None,
+        judge: Judge | None = None,
+        settings: RunSettings | None = None,
+        run_dir: str | Path | None = None,
+        initial: Sequence[GaussianTF] = (),
+        overwrite: bool = False,
+        spec: RunSpec | None = None,
+    ) -> Session:
+        """Start a new run from in-memory objects. ``initial`` TFs join the first population."""
+        from intuitf.session.lock import RunLock
+
+        intent = intent or Intent()
+        settings = settings or RunSettings()
+        settings.validate()
+        if judge is None:
+            from intuitf.evaluator.metric import MetricJudge
+
+            judge = MetricJudge()
+        rd = RunDirectory(run_dir) if run_dir is not None else None
+        lock = None
+        if rd is not None:
+            rd.root.mkdir(parents=True, exist_ok=True)
+            lock = RunLock(rd.root)
+            lock.acquire()
+        try:
+            return cls._new(
+                volume, intent, judge, settings, rd, list(initial), overwrite, spec, lock
+            )
+        except BaseException:
+            if lock is not None:
+                lock.release()
+            raise
+
+    @classmethod
+    def _new(cls, volume, intent, judge, settings, rd, initial, overwrite, spec, lock) -> Session:
+        from intuitf.explorer import make_explorer
+
+        settings.validate()
+        plan = settings.stage_plan(intent.kind != "none")
+        counts, _ = volume.histogram()
+        explorer = make_explorer(
+            settings.explorer,
+            population=settings.population,
+            n_gaussians=settings.n_gaussians,
+            generations=plan[0][1],
+            stage=plan[0][0],
+            seed=settings.seed,
+            histogram=counts,
+            value_range=volume.value_range,
+            initial=list(initial),
+            palette=_palette_hint(intent, settings),
+            hints=_material_hints(intent, settings, volume),
+        )
+        if plan[0][0] == "refine":
+            if len(initial) != 1 or not intent.selected:
+                raise SessionError(
+                    "Refinement starts from one transfer function and needs the Gaussians to change.",
+                    "Give exactly one TF to refine and select at least one of its Gaussians.",
+                )
+            try:
+                explorer.set_stage(
+                    "refine", generations=plan[0][1], selected=intent.selected, base=initial[0]
+                )
+            except ValueError as exc:
+                raise SessionError(f"Cannot refine: {exc}") from exc
+        if rd is not None:
+            rd.create(overwrite=overwrite)
+            spec = _spec_for_record(spec, intent, settings, initial, judge, rd)
+            from intuitf.session.building import redacted
+
+            rd.write_run(
+                {
+                    "spec": redacted(spec).to_dict(),
+                    "volume": volume.summary(),
+                    "intent": _intent_record(intent),
+                    "judge": _judge_name(judge),
+                    "judges": [{"judge": _judge_name(judge), "from_generation": 0}],
+                    "settings": settings.to_dict(),
+                    "plan": [list(p) for p in plan],
+                    "initial": [tf.to_dict() for tf in initial],
+                    "parent": spec.parent.model_dump() if spec.parent else None,
+                    "versions": _versions(),
+                    "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                }
+            )
+            rd.append_journal({"type": "stage", "generation": 0, "stage": plan[0][0]})
+        sess = cls(
+            volume,
+            intent=intent,
+            judge=judge,
+            settings=settings,
+            run_dir=rd,
+            explorer=explorer,
+            spec=spec,
+            lock=lock,
+        )
+        sess.events.emit("stage_started", stage=plan[0][0], generations=plan[0][1], generation=0)
+        return sess
+
+    @classmethod
+    def refine(
+        cls,
+        volume: Volume,
+        tf: GaussianTF,
+        selected: Sequence[int],
+        instruction: str,
+        *,
+        judge: Judge | None = None,
+        settings: RunSettings | None = None,
+        run_dir: str | Path | None = None,
+        about: str | None = None,
+        overwrite: bool = False,
+    ) -> Session:
+        """A run of the refine stage: only the Gaussians ``selected`` (indices into ``tf``) change.
+
+        The judge sees the rendering before the edit and ``instruction``, and prefers
+        candidates where the change happened in the selected features and the rest is kept.
+        """
+        intent = Intent(
+            kind="edit", text=instruction, selected=tuple(int(i) for i in selected), about=about
+        )
+        if judge is None:
+            from intuitf.evaluator.metric import MetricJudge
+
+            judge = MetricJudge()
+        rd = RunDirectory(run_dir) if run_dir is not None else None
+        lock = None
+        if rd is not None:
+            from intuitf.session.lock import RunLock
+
+            rd.root.mkdir(parents=True, exist_ok=True)
+            lock = RunLock(rd.root)
+            lock.acquire()
+        try:
+            return cls._refine_from(
+                volume, tf, intent, judge, settings or RunSettings(), rd, None, overwrite, lock
+            )
+        except BaseException:
+            if lock is not None:
+                lock.release()
+            raise
+
+    @classmethod
+    def _refine_from(cls, volume, tf, intent, judge, settings, rd, spec, overwrite, lock):
+        if not settings.stages or settings.stages[0][0] != "refine":
+            settings.stages = [("refine", settings.generations)]
+        intent = _with_selection(intent, volume, [tf], settings)  # base picture and mask
+        return cls._new(volume, intent, judge, settings, rd, [tf], overwrite, spec, lock)
+
+    @classmethod
+    def resume(
+        cls,
+        run_dir: str | Path,
+        volume: Volume | None = None,
+        judge: Judge | None = None,
+        *,
+        evaluator: str | None = None,
+        base_url: str | None = None,
+        budget_usd: float | None = None,
+        budget_calls: int | None = None,
+        judge_options: dict | None = None,
+    ) -> Session:
+        """Continue the run in ``run_dir`` from its last checkpoint.
+
+        The volume and the judge are rebuilt from the run's spec unless given. ``evaluator``
+        and ``base_url`` move the run to another model or server (recorded in ``run.json``);
+        the budgets replace the run's and count everything the run already paid.
+        """
+        from intuitf.explorer import explorer_from_state
+        from intuitf.session.building import build_judge, load_intent, redacted, spec_of_record
+        from intuitf.session.lock import RunLock
+
+        rd = RunDirectory(run_dir)
+        record = rd.read_run()
+        lock = RunLock(rd.root)
+        lock.acquire()
+        try:
+            spec = spec_of_record(record)
+            settings = RunSettings.from_dict(record["settings"])
+            spec, moved = _moved_spec(spec, evaluator, base_url, budget_usd, budget_calls,
+                                      judge_options, judge is None)  # fmt: skip
+            ckpt = rd.read_checkpoint()
+            vol = volume if volume is not None else spec.volume.load()
+            if judge is None:
+                judge = build_judge(spec.judge, rd.root, settings.protocol)
+            generation = int(ckpt["generation"]) if ckpt else 0
+            stored = redacted(spec).to_dict()
+            if moved or stored != record.get("spec"):
+                record["spec"] = stored
+                judges = record.setdefault("judges", [])
+                if moved:
+                    judges.append({"judge": _judge_name(judge), "from_generation": generation})
+                    record["judge"] = _judge_name(judge)
+                rd.write_run(record)
+            if ckpt and ckpt.get("intent"):
+                intent = load_intent(_intent_spec(ckpt["intent"]), rd.root)
+            else:
+                intent = load_intent(spec.intent, rd.root)
+            initial_tfs = [GaussianTF.from_dict(d) for d in spec.initial]
+            intent = _with_selection(intent, vol, initial_tfs, settings)
+            if ckpt is None:
+                # Stopped before the first generation finished: start over, same seed; the
+                # verdict store still holds whatever was paid for.
+                initial = [GaussianTF.from_dict(d) for d in spec.initial]
+                sess = cls._new(vol, intent, judge, settings, None, initial, False, spec, lock)
+                sess.run_dir = rd
+                sess.name = rd.root.name
+                sess.events = EventLog(sess.name, rd.events)
+                sess.cost = _paid(judge, sess.cost, rd)
+                sess.judge_moved = moved
+                sess._refresh()
+                if moved:
+                    sess._journal({"type": "judge", "generation": 0, "judge": _judge_name(judge)})
+                return sess
+            sess = cls(
+                vol,
+                intent=intent,
+                judge=judge,
+                settings=settings,
+                run_dir=rd,
+                explorer=explorer_from_state(ckpt["explorer"]),
+                stage_index=int(ckpt["stage_index"]),
+                generation=generation,
+                cost=_paid(judge, Cost(**ckpt.get("cost", {})), rd),
+                ratings={k: float(v) for k, v in ckpt.get("ratings", {}).items()},
+                last_ranking=list(ckpt.get("ranking", [])),
+                population_tfs={k: GaussianTF.from_dict(v) for k, v in ckpt.get("tfs", {}).items()},
+                stage_games=ckpt.get("stage_games", []),
+                plan=ckpt.get("plan"),
+                spec=spec,
+                human=[HumanVerdict.from_dict(h) for h in ckpt.get("human", [])],
+                pre_tell=ckpt.get("pre_tell"),
+                queries=int(ckpt.get("queries", 0)),
+                lock=lock,
+            )
+            sess._model_ranking = ckpt.get("model_ranking")
+            sess._model_ratings = ckpt.get("model_ratings")
+            if "judged_games" in ckpt:
+                sess._judged_games = [tuple(g) for g in ckpt["judged_games"]]
+                sess._judged_stage = int(ckpt.get("judged_stage", sess.stage_index))
+            if ckpt.get("intent"):
+                sess._current_intent_record = ckpt["intent"]
+            sess.judge_moved = moved
+            if moved:
+                sess._journal(
+                    {"type": "judge", "generation": generation, "judge": _judge_name(judge)}
+                )
+            return sess
+        except BaseException:
+            lock.release()
+            raise
+
+    @classmethod
+    def branch(
+        cls,
+        parent_dir: str | Path,
+        run_dir: str | Path,
+        *,
+        generation: int | None = None,
+        candidate: str | None = None,
+        changes: dict | None = None,
+        judge: Judge | None = None,
+        volume: Volume | None = None,
+    ) -> Session:
+        """A new run that starts where ``parent_dir``'s run was at ``generation``, or from its
+        ``candidate`` (an id like ``g003-007``), with ``changes`` to its spec (plain data,
+        merged field by field: a new intent, judge, settings, ...).
+
+        From a generation with an unchanged spec, the branch reproduces the parent's run from
+        there: the Explorer's state, the stage, the ratings and the verdicts are the parent's
+        at that point. From a candidate, the candidate joins a fresh first population (as
+        ``--start-from`` does) and the branch starts its own plan.
+        """
+        from intuitf.session.building import spec_of_record
+        from intuitf.session.spec import ParentLink
+
+        parent = RunDirectory(parent_dir)
+        record = parent.read_run()
+        base = spec_of_record(record).to_dict()
+        for key, value in (changes or {}).items():
+            if isinstance(value, dict) and isinstance(base.get(key), dict) and key != "intent":
+                base[key] = {**base[key], **value}
+            else:
+                base[key] = value
+        for name in ("reference", "sketch", "base"):  # the parent's copies, by full path
+            path = (base.get("intent") or {}).get(name)
+            if path and not Path(path).is_absolute() and (parent.root / path).exists():
+                base["intent"][name] = str(parent.root / path)
+        link = {"run": str(parent.root), "generation": generation, "candidate": candidate}
+        if candidate is not None:
+            tf = _candidate_tf(parent, candidate)
+            base["initial"] = [tf.to_dict()]
+            if (base.get("intent") or {}).get("kind") == "edit":
+                link["selected"] = list(base["intent"].get("selected", []))
+        base["parent"] = link
+        spec = parse_spec(base)
+        if generation is None or generation == 0 or candidate is not None:
+            return cls.open(spec, run_dir, judge=judge, volume=volume)
+        ckpt_path = parent.generation_checkpoint(generation)
+        if not ckpt_path.exists():
+            raise SessionError(
+                f"{parent.root} has no saved state for generation {generation}.",
+                "Branch from a generation the run has finished (see its history).",
+            )
+        ParentLink.model_validate(link)
+        sess = cls.open(spec, run_dir, judge=judge, volume=volume)
+        # Take over the parent's state at that generation, then continue as a resume would.
+        import json
+
+        state = json.loads(ckpt_path.read_text(encoding="utf-8"))
+        state["cost"] = Cost().to_dict()  # the branch pays only for what it asks itself
+        assert sess.run_dir is not None
+        sess.run_dir.write_checkpoint(state)
+        rd_root, judge_used, vol = sess.run_dir.root, sess.judge, sess.volume
+        sess.close()
+        return cls.resume(rd_root, vol, judge_used)
+
+
+# -- helpers -----------------------------------------------------------------------------
+def _versions() -> dict:
+    import platform
+
+    import numba
+
+    import intuitf
+
+    return {
+        "intuitf": intuitf.__version__,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "numba": numba.__version__,
+    }
+
+
+def _intent_spec(rec: dict):
+    from intuitf.session.spec import IntentSpec
+
+    pictures = rec.get("pictures", {})
+    return IntentSpec.model_construct(
+        kind=rec.get("kind", "none"),
+        text=rec.get("text"),
+        about=rec.get("about"),
+        selected=list(rec.get("selected", [])),
+        reference=pictures.get("reference"),
+        sketch=pictures.get("sketch"),
+        base=pictures.get("base"),
+    )
+
+
+def _spec_for_record(spec, intent, settings, initial, judge, rd) -> RunSpec:
+    """The spec to write into run.json: the given one, or one describing in-memory inputs."""
+    from intuitf.session.building import intent_spec_of, save_intent_pictures
+    from intuitf.session.spec import JudgeSpec
+
+    pictures = save_intent_pictures(intent, rd.root)
+    if spec is None:
+        return RunSpec.model_construct(
+            version=1,
+            name=rd.root.name,
+            volume=_volume_spec_unknown(),
+            intent=intent_spec_of(intent, pictures),
+            judge=JudgeSpec(
+                spec=_judge_name(judge) if _judge_name(judge) != "metric" else "metric"
+            ),
+            settings=settings.to_dict(),
+            initial=[tf.to_dict() for tf in initial],
+            parent=None,
+        )
+    return spec.model_copy(
+        update={
+            "intent": intent_spec_of(intent, pictures),
+            "settings": settings.to_dict(),
+            "name": spec.name or rd.root.name,
+        }
+    )
+
+
+def _volume_spec_unknown():
+    from intuitf.session.spec import VolumeSpec
+
+    # An in-memory volume has no source to reopen; resuming needs the volume passed in.
+    return VolumeSpec.model_construct(source="", shape=None, dtype=None, byte_order=None,
+                                      spacing=None, max_dim=None)  # fmt: skip
+
+
+def _moved_spec(spec: RunSpec, evaluator, base_url, budget_usd, budget_calls, options, build):
+    """The spec with a resume's judge changes applied, and whether the judge moved."""
+    from intuitf.session.building import resumed_judge_spec
+
+    moved = False
+    if build and spec.judge.is_model or evaluator or base_url:
+        judge_spec, moved = resumed_judge_spec(spec.judge, evaluator, base_url)
+        spec = spec.model_copy(update={"judge": judge_spec})
+    j = spec.judge
+    update: dict[str, Any] = {}
+    if budget_usd is not None:
+        if budget_usd < 0:
+            raise SessionError(f"A budget cannot be negative (got ${budget_usd}).")
+        update["budget_usd"] = budget_usd
+    if budget_calls is not None:
+        if budget_calls < 0:
+            raise SessionError(f"A budget cannot be negative (got {budget_calls} calls).")
+        update["budget_calls"] = budget_calls
+    if options:
+        update["options"] = {**j.options, **options}
+    if not update:
+        return spec, moved
+    return spec.model_copy(update={"judge": j.model_copy(update=update)}), moved
+
+
+def _candidate_tf(rd: RunDirectory, candidate: str) -> GaussianTF:
+    for entry in reversed(rd.generations()):
+        for c in entry.get("candidates", []):
+            if c.get("id") == candidate:
+                return GaussianTF.from_dict(c["tf"])
+    raise SessionError(
+        f"No candidate {candidate!r} in {rd.root}.",
+        "Use an id from the run's history, like g003-007.",
+    )
