@@ -75,3 +75,31 @@ def _fit_mask(mask: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     rows = (np.arange(shape[0]) * m.shape[0] // shape[0]).clip(0, m.shape[0] - 1)
     cols = (np.arange(shape[1]) * m.shape[1] // shape[1]).clip(0, m.shape[1] - 1)
     return m[rows][:, cols]
+
+
+def edit_intent(intent, volume, tf, settings):
+    """``intent`` (an edit of ``tf``'s selected Gaussians) with its base picture and mask.
+
+    For the Session: the rendering before the edit (when the intent has none), made as the
+    candidates are (the same sample cache, so an unchanged TF gives the same pixels), and the
+    pixels the selected Gaussians cover in it (:func:`selection_mask`). ``settings`` gives
+    the camera, picture size, shading and background (a ``RunSettings``).
+    """
+    from dataclasses import replace
+
+    from intuitf.render import Camera, VolumeRenderer
+
+    if intent.base is not None and intent.selection_mask is not None:
+        return intent
+    camera = Camera.from_dict(settings.camera) if settings.camera else Camera()
+    cache = VolumeRenderer(
+        volume,
+        size=settings.image_size,
+        shading=settings.shading,
+        background=tuple(settings.background),
+    ).sample_cache(camera)
+    base = intent.base if intent.base is not None else cache.render(tf)
+    mask = intent.selection_mask
+    if mask is None and intent.selected:
+        mask = selection_mask(cache.attribution(tf), intent.selected)
+    return replace(intent, base=base, selection_mask=mask)

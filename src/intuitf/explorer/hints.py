@@ -37,6 +37,7 @@ class Hint:
     spread: float = 0.03
     color: RGB | None = None
     height: tuple[float, float] | None = None
+    hidden: bool = False
 
     def __post_init__(self) -> None:
         if self.center is not None and not 0.0 <= float(self.center) <= 1.0:
@@ -69,6 +70,7 @@ class Hint:
             "spread": self.spread,
             "color": list(self.color) if self.color else None,
             "height": list(self.height) if self.height else None,
+            "hidden": self.hidden,
         }
 
     @classmethod
@@ -79,6 +81,7 @@ class Hint:
             spread=float(d.get("spread", 0.03)),
             color=None if d.get("color") is None else tuple(d["color"]),
             height=None if d.get("height") is None else tuple(d["height"]),
+            hidden=bool(d.get("hidden", False)),
         )
 
 
@@ -150,7 +153,7 @@ def hinted_tf(
             bounds.width[1], max(bounds.width[0], h.spread * math.exp(rng.normal(0.0, 0.3)))
         )
         band = h.height or bounds.height_init
-        height = sample_hint_height(rng, band, bounds)
+        height = 0.0 if h.hidden else sample_hint_height(rng, band, bounds)
         rgb = bounds.sample_palette_color(rng, [h.color]) if h.color else color(rng)
         gs.append(Gaussian(mean, width, height, rgb))
     others = [m for m in materials if all(not h.reaches(m.center) for h in placed)]

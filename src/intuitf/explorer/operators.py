@@ -151,7 +151,9 @@ def mutate(
             hint = hint_for(mean, p.hints)
             if hint is not None:
                 hinted[i] = hint
-                if hint.height is not None:
+                if hint.hidden:
+                    height = max(b.height[0], 0.0)
+                elif hint.height is not None:
                     height = sample_hint_height(rng, hint.height, b)
         gs[i] = replace(g, mean=mean, width=width, height=height)
     if len(free) >= 2 and rng.random() < p.swap_prob:

@@ -1,0 +1,529 @@
+"""Text → material hints: which clause names which material, its colour and its opacity.
+
+"Opaque ivory bone, faint red skin" names two materials, their colours and their opacities,
+and general knowledge of CT says where each sits among the volume's values: air < fat < skin
+and soft tissue < muscle < contrast-filled vessels < bone < dentin < enamel < metal. This module
+turns a text into such hints and places each on the volume's histogram materials (the peaks
+and tail quantiles of :func:`intuitf.tf.defaults.find_materials`):
+
+- **Hounsfield units**, when the volume is CT in HU (values reach about -1000, air): each
+  material at its HU range (bone 300-1900, fat -150 to -50, ...);
+- otherwise by **role and density order**: skin and soft tissue on the main low material,
+  bone on the first material clearly above it, enamel, teeth and metal on the highest, dentin
+  below enamel; "the engine block", "the body", "the object" on the material most voxels
+  hold; "dense parts" on the first material above that; "core", "inner", "densest" on the
+  highest; "outline", "surface", "outer", "shell" on the boundary between the background and
+  the first material. Hints are then kept in density order (a denser material never sits
+  below a lighter one).
+
+It says plainly which words it does not understand (:attr:`TextHints.unknown`); a word it
+does not know changes nothing. The Explorer gets the hints as plain numbers
+(:func:`explorer_hints`): it never sees the text, and the judge still decides.
+
+An edit ("make the crown gold", applied to selected features) gives hints without a place:
+the selection says where, so the colour and opacity apply to the selected Gaussians.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from intuitf.evaluator.metric import NAMED_COLOURS, named_colours
+from intuitf.evaluator.types import Intent
+
+RGB = tuple[float, float, float]
+
+# -- vocabulary --------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Term:
+    material: str  # canonical name
+    pattern: str  # regular expression (matched on lower-case text, at word boundaries)
+    level: float  # place in the density order (CT): air 0 ... metal 8
+    role: str  # how it is placed without Hounsfield units (see _place_by_role)
+    hu: tuple[float, float] | None = None  # Hounsfield range, for CT in HU
+
+
+#: Materials by the words that name them. Longer phrases come first (matched first).
+TERMS: tuple[_Term, ...] = (
+    _Term("soft tissue", r"soft[- ]tissues?", 2.3, "soft", (20, 80)),
+    _Term("white matter", r"white matter", 2.4, "soft", (20, 40)),
+    _Term("grey matter", r"gr[ae]y matter", 2.3, "soft", (30, 45)),
+    _Term("dense parts", r"(dense|denser|high[- ]density|heavy|thick)\s+(parts?|regions?|"
+          r"structures?|material|metal|components?|areas?)", 6.0, "dense"),
+    _Term("densest parts", r"dense[s]?t(\s+(parts?|regions?|structures?|material))?|"
+          r"highest values?|high values?|maxim(a|um)|peaks?", 7.0, "top"),
+    _Term("low values", r"low(est)? values?|low[- ]density|light(er)? (parts?|material)|"
+          r"thin (parts?|material)", 1.0, "low"),
+    _Term("main material", r"(engine )?block|engine|body|object|main (material|structure|part)|"
+          r"casing|housing|bulk|matrix|whole (thing|object|volume)|structure", 3.0, "main"),
+    _Term("core", r"core|inner(most)?( parts?| structures?| layers?| region)?|interior|"
+          r"cent(er|re)|nucleus", 7.0, "top"),
+    _Term("outline", r"outlines?|contours?|silhouettes?|surfaces?|shells?|envelopes?|"
+          r"outer(most)?( parts?| layers?| shell| surface)?|outside|exterior|boundary|"
+          r"boundaries|edges?", 1.0, "boundary"),
+    _Term("middle", r"middle|intermediate|medium( values?| density)?|mid[- ]range",
+          4.0, "middle"),
+    _Term("air", r"air(ways?)?|trachea|sinus(es)?|gas|empty space", 0.0, "air", (-1024, -900)),
+    _Term("lungs", r"lungs?|pulmonary", 0.5, "low", (-900, -500)),
+    _Term("fat", r"fat|fatty tissue|adipose", 1.0, "soft", (-150, -50)),
+    _Term("fluid", r"fluids?|water|csf|cerebrospinal fluid|ventricles?|edema|oedema|cysts?",
+          1.5, "soft", (-10, 20)),
+    _Term("skin", r"skin|scalp|flesh", 2.0, "skin", (-100, 60)),
+    _Term("soft tissue", r"tissues?|organs?|brain|liver|kidneys?|heart|gums?|pulp|"
+          r"ligaments?|tendons?", 2.3, "soft", (20, 80)),
+    _Term("muscle", r"muscles?|muscular", 2.5, "soft", (35, 60)),
+    _Term("cartilage", r"cartilage|discs?|menisc(us|i)", 3.0, "soft", (80, 140)),
+    _Term("vessels", r"(blood )?vessels?|arter(y|ies)|veins?|aorta|aneurysms?|blood|"
+          r"vasculature|contrast", 3.5, "vessels", (150, 450)),
+    _Term("bone", r"bones?|bony|skeleton|skeletal|skull|cranium|spine|vertebra[e]?|ribs?|"
+          r"pelvis|femur|jaw|mandible|cortical|trabecular|fins? rays?|fishbones?", 5.0, "bone",
+          (300, 1900)),
+    _Term("dentin", r"dentine?|roots?", 5.5, "dentin", (1200, 2000)),
+    _Term("enamel", r"enamel|crowns?|teeth|tooth|dental", 6.5, "top", (2000, 3000)),
+    _Term("metal", r"metal(lic)?|implants?|fillings?|screws?|plates?|stents?|wires?|"
+          r"prosthes[ie]s", 8.0, "top", (2500, 4000)),
+)  # fmt: skip
+
+_TERM_RE = [(t, re.compile(rf"\b(?:{t.pattern})\b")) for t in TERMS]
+
+#: Opacity words, most specific first: (look, regular expression).
+_OPACITY: tuple[tuple[str, re.Pattern], ...] = (
+    ("hidden", re.compile(r"\b(hid(e|den)|invisible|remove[d]?|no|without|omit\w*|"
+                          r"not (shown|visible))\b")),
+    ("semi", re.compile(r"\b(semi[- ]?(op\w*|transparent|translucent)|translucent|"
+                        r"half[- ]?transparent|see[- ]through|partly transparent)\b")),
+    ("faint", re.compile(r"\b(faint\w*|transparent|ghost\w*|subtle|wispy|barely visible|"
+                         r"thin veil|hint of|light(ly)? (veil|touch))\b")),
+    ("opaque", re.compile(r"\b((fully?[- ]?)?op[aq]\w*e|solid|dense(ly)? (coloured|colored)|"
+                          r"strong|prominent|bold)\b")),
+)  # fmt: skip
+
+#: Comparative opacity words of an edit ("make it more transparent").
+_MORE_OPAQUE = re.compile(r"\b(more (opaque|solid|visible)|less (transparent|faint)|"
+                          r"(solid|opaque|visible)r?|stronger|thicker)\b")  # fmt: skip
+_LESS_OPAQUE = re.compile(r"\b(more (transparent|translucent|faint)|less (opaque|solid|visible)|"
+                          r"fainter|lighter|thinner|weaker|transparent|translucent|faint)\b")  # fmt: skip
+
+#: Gaussian heights (opacity per unit length) for each look; None: the Explorer's default range.
+HEIGHT_BANDS: dict[str, tuple[float, float] | None] = {
+    "opaque": (0.3, 1.0),
+    "semi": (0.01, 0.12),
+    "faint": (0.003, 0.04),
+    "hidden": None,  # handled as height 0
+    None: (0.02, 0.7),  # named but no opacity word: visible
+}  # type: ignore[dict-item]
+
+#: Words that carry no material, colour or opacity but are understood (or harmless).
+_KNOWN_WORDS = set(
+    """a an the and or with without in on of for to at by from as its it this that these those
+    is are be being been make makes made making show shows shown showing render rendered
+    rendering renderings display displayed visualise visualize visualised visualized highlight
+    highlighted emphasise emphasize emphasised emphasized keep kept leave let want would like
+    please i we me my our you your colour color coloured colored colours colors tint tinted
+    tinge hue shade shaded shading look looks looking appear appears visible clearly clear
+    clean cleanly nice nicely well good very slightly bit little more less most least than
+    but while whereas also too only just all every each some other rest else everything
+    nothing part parts region regions structure structures layer layers area areas
+    volume data scan ct mri image picture view human ray rays value values density
+    painted paint in into over under around behind front back against background instead
+    same whole change changed turn turned set should can could must so then there here
+    where which what see seen one two three both either neither like style tone toned
+    bright brighter dark darker light pale deep vivid rich soft strong""".split()
+)
+
+_WORD_RE = re.compile(r"[a-z][a-z'-]*")
+_CLAUSE_SPLIT = re.compile(r"[,;.:!?]|\band\b|\bwith\b|\bbut\b|\bwhile\b|\bwhereas\b|\bplus\b")
+
+
+# -- hints -------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class MaterialHint:
+    """One material a text names, with the colour and look it asks for, and where it sits.
+
+    ``center``/``spread`` are normalised values (None when not placed: an edit, or no volume
+    given); ``placed_by`` says how the place was found ("hounsfield", "role", "selection").
+    ``opacity`` is "opaque", "semi", "faint", "hidden" or None (not said).
+    """
+
+    clause: str
+    material: str
+    words: str
+    colour: str | None = None
+    rgb: RGB | None = None
+    opacity: str | None = None
+    level: float = 0.0
+    role: str = "soft"
+    center: float | None = None
+    spread: float = 0.03
+    placed_by: str = ""
+
+    @property
+    def height_band(self) -> tuple[float, float] | None:
+        """The Gaussian heights the look asks for (None: hidden, height 0)."""
+        return HEIGHT_BANDS.get(self.opacity, HEIGHT_BANDS[None])
+
+    def to_explorer(self) -> dict:
+        """The hint as the Explorer takes it (:class:`intuitf.explorer.hints.Hint`)."""
+        band = self.height_band
+        return {
+            "name": self.material,
+            "center": self.center,
+            "spread": self.spread,
+            "color": list(self.rgb) if self.rgb else None,
+            "height": list(band) if band else None,
+            "hidden": self.opacity == "hidden",
+        }
+
+    def describe(self, value_range: tuple[float, float] | None = None) -> str:
+        """One line: '"ivory bone": bone, ivory, opaque, at 205 (role)'."""
+        parts = [self.material]
+        if self.colour:
+            parts.append(self.colour)
+        if self.opacity:
+            parts.append(self.opacity)
+        where = ""
+        if self.center is not None:
+            v = self.center
+            if value_range is not None:
+                lo, hi = value_range
+                v = lo + v * (hi - lo)
+            where = f", at {v:.4g} ({self.placed_by})"
+        return f'"{self.words}": ' + ", ".join(parts) + where
+
+
+@dataclass
+class TextHints:
+    """Everything a text says about single materials, and what it did not understand."""
+
+    text: str
+    hints: list[MaterialHint] = field(default_factory=list)
+    unknown: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    def summary(self, value_range: tuple[float, float] | None = None) -> str:
+        """Several lines a person can read: one per hint, then what was not understood."""
+        lines = [h.describe(value_range) for h in self.hints] or ["no material named"]
+        lines += self.notes
+        if self.unknown:
+            lines.append("not understood: " + ", ".join(self.unknown))
+        return "\n".join(lines)
+
+
+def parse_text(text: str | None) -> TextHints:
+    """The material hints of ``text`` (not yet placed on a volume), and the words not understood.
+
+    Clauses are split at punctuation and at "and", "with", "but", "while"; in each clause the
+    first material word names the material, and the clause's colour and opacity words apply to
+    it. A clause with a colour or opacity but no material word gives its colour to the
+    clause's nearest material (or, with no material in the text at all, is left to the
+    palette). Materials named with neither colour nor opacity are kept only when no clause
+    says anything else (then "show the bone" means: the bone, visible).
+    """
+    raw = (text or "").strip()
+    out = TextHints(text=raw)
+    low = raw.lower()
+    used: list[tuple[int, int]] = []
+    hints: list[MaterialHint] = []
+    for clause in _CLAUSE_SPLIT.split(low):
+        clause = clause.strip()
+        for term, words, segment in _materials_in(clause):
+            colours = named_colours(segment)
+            colour = colours[0] if colours else None
+            look = _look(segment)
+            same = [k for k, h in enumerate(hints) if h.material == term.material]
+            if same and (hints[same[0]].colour or hints[same[0]].opacity or not (colour or look)):
+                continue  # named twice: the first mention that says something about it wins
+            rgb = tuple(float(c) / 255.0 for c in NAMED_COLOURS[colour]) if colour else None
+            hint = MaterialHint(
+                clause=clause, material=term.material, words=words, colour=colour,
+                rgb=rgb, opacity=look, level=term.level, role=term.role,  # type: ignore[arg-type]
+            )  # fmt: skip
+            if same:
+                hints[same[0]] = hint
+            else:
+                hints.append(hint)
+    if any(h.colour or h.opacity for h in hints):
+        subject = [h for h in hints if not (h.colour or h.opacity)]
+        if subject:
+            out.notes.append(
+                "named without a colour or opacity, taken as what the volume shows: "
+                + ", ".join(f'"{h.words}"' for h in subject)
+            )
+        hints = [h for h in hints if h.colour or h.opacity]
+    out.hints = hints
+    out.unknown = _unknown_words(low, used)
+    return out
+
+
+def _materials_in(clause: str) -> list[tuple[_Term, str, str]]:
+    """The materials a clause names, each with the words that describe it.
+
+    Matches may not overlap (at one place the longer phrase wins: "soft tissue" over
+    "tissue"). A material is described by the words before it, back to the previous
+    material ("white bones inside translucent pink soft tissue": "white" for the bones,
+    "inside translucent pink" for the soft tissue); the last one also by the words after
+    it ("the bones in gold").
+    """
+    found: list[tuple[int, int, _Term]] = []
+    for term, rx in _TERM_RE:
+        for m in rx.finditer(clause):
+            found.append((m.start(), m.end(), term))
+    found.sort(key=lambda f: (f[0], -(f[1] - f[0])))
+    kept: list[tuple[int, int, _Term]] = []
+    for f in found:
+        if not kept or f[0] >= kept[-1][1]:
+            kept.append(f)
+    out = []
+    for k, (a, b, term) in enumerate(kept):
+        prev_end = kept[k - 1][1] if k else 0
+        before = clause[prev_end:b]
+        after = clause[b:] if k == len(kept) - 1 else ""
+        segment = before if (named_colours(before) and _look(before)) else before + " " + after
+        if k < len(kept) - 1:
+            segment = before
+        out.append((term, clause[a:b], segment))
+    return out
+
+
+def _look(clause: str) -> str | None:
+    """The clause's opacity word: "hidden", "semi", "faint", "opaque" or None."""
+    for look, rx in _OPACITY:
+        if rx.search(clause):
+            return look
+    return None
+
+
+def _unknown_words(text: str, used: list[tuple[int, int]]) -> list[str]:
+    """Words of ``text`` that are neither vocabulary, colour, opacity nor common words."""
+    covered = np.zeros(len(text) + 1, bool)
+    for _, rx in _TERM_RE:
+        for m in rx.finditer(text):
+            covered[m.start() : m.end()] = True
+    for rx in [r for _, r in _OPACITY] + [_MORE_OPAQUE, _LESS_OPAQUE]:
+        for m in rx.finditer(text):
+            covered[m.start() : m.end()] = True
+    colour_rx = re.compile(
+        r"\b("
+        + "|".join(re.escape(k) for k in sorted(NAMED_COLOURS, key=len, reverse=True))
+        + r")\b"
+    )
+    for m in colour_rx.finditer(text):
+        covered[m.start() : m.end()] = True
+    out: list[str] = []
+    for m in _WORD_RE.finditer(text):
+        w = m.group(0).strip("'-")
+        if not w or covered[m.start() : m.end()].any() or w in _KNOWN_WORDS:
+            continue
+        if w.endswith("s") and w[:-1] in _KNOWN_WORDS:
+            continue
+        if w not in out:
+            out.append(w)
+    return out
+
+
+# -- placing hints on a volume -----------------------------------------------------------------
+
+
+def is_hounsfield(value_range: tuple[float, float], dtype: str | None = None) -> bool:
+    """Whether values look like CT in Hounsfield units: air near -1000, bone above +300."""
+    lo, hi = value_range
+    return lo <= -900.0 and hi >= 300.0 and (dtype is None or not str(dtype).startswith("uint"))
+
+
+def place_hints(
+    parsed: TextHints,
+    counts: np.ndarray,
+    value_range: tuple[float, float] = (0.0, 1.0),
+    dtype: str | None = None,
+) -> TextHints:
+    """``parsed`` with every hint placed on the volume whose histogram is ``counts``.
+
+    CT in Hounsfield units (:func:`is_hounsfield`): each material at its HU range. Otherwise
+    by role among the histogram's materials (see the module docstring), then in density
+    order.
+    """
+    from intuitf.tf.defaults import find_materials
+
+    c = np.asarray(counts, dtype=np.float64).ravel()
+    if not parsed.hints or c.size < 8 or c.sum() <= 0:
+        return parsed
+    lo, hi = (float(v) for v in value_range)
+    span = max(hi - lo, 1e-12)
+    hu = is_hounsfield((lo, hi), dtype)
+    mats = find_materials(c, max_materials=6)
+    layout = _Layout.of(c, mats)
+    placed: list[MaterialHint] = []
+    for h in parsed.hints:
+        term_hu = next((t.hu for t in TERMS if t.material == h.material and t.hu), None)
+        if hu and term_hu is not None:
+            a, b = (float(np.clip((v - lo) / span, 0.0, 1.0)) for v in term_hu)
+            center, spread, how = (a + b) / 2.0, max(0.004, (b - a) / 4.0), "hounsfield"
+            if h.material == "bone":  # what shows bone is its surface, near the lower end
+                center = a + 0.25 * (b - a)
+        else:
+            center, spread = layout.place(h.role)
+            how = "density order" if h.role not in ("main", "boundary") else h.role
+        placed.append(_with(h, center=float(center), spread=float(spread), placed_by=how))
+    if not hu:
+        placed = _keep_density_order(placed, layout)
+    return TextHints(parsed.text, placed, list(parsed.unknown), list(parsed.notes))
+
+
+def _with(h: MaterialHint, **kw) -> MaterialHint:
+    d = dict(h.__dict__)
+    d.update(kw)
+    return MaterialHint(**d)
+
+
+@dataclass
+class _Layout:
+    """Where a volume's materials are: background mode, main material, the rest, sorted."""
+
+    background: float
+    slots: list[tuple[float, float, float]]  # (center, spread, fraction), by value
+    main: int
+
+    @classmethod
+    def of(cls, counts: np.ndarray, mats) -> _Layout:
+        from intuitf.tf.defaults import background_cutoff
+
+        n = counts.size
+        cut = background_cutoff(counts)
+        below = counts[: max(1, int(cut * (n - 1)) + 1)]
+        background = (int(np.argmax(below)) + 0.5) / n
+        slots = [(float(m.center), float(m.spread), float(m.fraction)) for m in mats]
+        if not slots:
+            slots = [(0.5, 0.05, 1.0)]
+        main = int(np.argmax([s[2] for s in slots]))
+        return cls(background, slots, main)
+
+    @property
+    def boundary(self) -> float:
+        """Where the background meets the first material (partial-volume surfaces)."""
+        return (self.background + self.slots[0][0]) / 2.0
+
+    @property
+    def boundary_spread(self) -> float:
+        return max(0.01, (self.slots[0][0] - self.background) / 6.0)
+
+    def _peaks_above(self, value: float, gap: float) -> list[int]:
+        return [i for i, s in enumerate(self.slots) if s[0] > value + gap]
+
+    def place(self, role: str) -> tuple[float, float]:
+        s, main = self.slots, self.main
+        top = len(s) - 1
+        if role == "air":
+            return self.background, 0.02
+        if role == "boundary":
+            return self.boundary, self.boundary_spread
+        if role in ("main", "soft"):
+            i = main
+        elif role == "skin":
+            # The first material, unless it is a sliver next to the background (a shoulder
+            # of the air's noise: painting it paints haze): then the main one.
+            i = 0 if s[0][2] >= 0.05 else main
+            i = min(i, main)
+        elif role == "low":
+            i = 0 if s[0][2] >= 0.05 else min(1, top)
+        elif role == "middle":
+            i = len(s) // 2
+        elif role in ("bone", "dense", "vessels"):
+            above = self._peaks_above(s[main][0], 0.08)
+            i = above[0] if above else top
+            if role == "vessels" and above and i > main + 1:
+                i = main + 1
+        elif role == "dentin":
+            i = max(main, top - 1) if top > 0 else 0
+        elif role == "top":
+            # The extreme end of the range is a handful of voxels: the material below it.
+            i = top - 1 if s[top][0] > 0.985 and top > 0 else top
+        else:
+            i = main
+        c, spread, _ = s[int(i)]
+        return c, max(spread, 0.012)
+
+    def slot_of(self, center: float) -> int:
+        return int(np.argmin([abs(center - s[0]) for s in self.slots]))
+
+
+def _keep_density_order(hints: list[MaterialHint], layout: _Layout) -> list[MaterialHint]:
+    """Re-place the density-ordered hints so that a denser material never sits below a lighter one.
+
+    Each hint keeps its place when the order allows; otherwise the assignment of materials
+    (the boundary just above the background counts as the lowest) that moves the hints the
+    fewest steps from their places wins, sharing a material only when there is no other way.
+    """
+    slots = [(layout.boundary, layout.boundary_spread)] + [(c, sp) for c, sp, _ in layout.slots]
+    todo = sorted(
+        (k for k, h in enumerate(hints) if h.placed_by == "density order"),
+        key=lambda k: hints[k].level,
+    )
+    if len(todo) < 2:
+        return hints
+    want = [1 + layout.slot_of(hints[k].center) for k in todo]  # type: ignore[arg-type]
+    n, m = len(todo), len(slots)
+    inf = float("inf")
+    cost = np.full((n, m), inf)
+    back = np.zeros((n, m), int)
+    cost[0] = [abs(j - want[0]) for j in range(m)]
+    for i in range(1, n):
+        differ = hints[todo[i]].level - hints[todo[i - 1]].level >= 0.5
+        for j in range(m):
+            options = [
+                cost[i - 1, jj] + (1.5 if differ and jj == j else 0.0) for jj in range(j + 1)
+            ]
+            jj = int(np.argmin(options))
+            cost[i, j] = options[jj] + abs(j - want[i])
+            back[i, j] = jj
+    j = int(np.argmin(cost[-1]))
+    out = list(hints)
+    for i in range(n - 1, -1, -1):
+        if j != want[i]:
+            c, sp = slots[j]
+            out[todo[i]] = _with(hints[todo[i]], center=float(c), spread=float(max(sp, 0.012)))
+        j = back[i, j]
+    return out
+
+
+# -- for the Session ---------------------------------------------------------------------------
+
+
+def intent_hints(intent: Intent, volume=None) -> TextHints:
+    """The hints of an intent's text, placed on ``volume`` when given (not for an edit)."""
+    parsed = parse_text(intent.text)
+    if intent.kind == "edit":
+        # The selection says where: every hint applies to the selected features.
+        parsed.hints = [_with(h, center=None, placed_by="selection") for h in parsed.hints]
+        if not parsed.hints and (named_colours(intent.text or "") or _look(intent.text or "")):
+            parsed.hints = [_edit_hint(intent.text or "")]
+        return parsed
+    if volume is None:
+        return parsed
+    counts, _ = volume.histogram()
+    return place_hints(
+        parsed, counts, tuple(volume.value_range), getattr(volume, "original_dtype", None)
+    )
+
+
+def _edit_hint(text: str) -> MaterialHint:
+    low = text.lower()
+    names = named_colours(low)
+    colour = names[0] if names else None
+    rgb = tuple(float(c) / 255.0 for c in NAMED_COLOURS[colour]) if colour else None
+    return MaterialHint(
+        clause=low, material="selection", words="the selection", colour=colour,
+        rgb=rgb, opacity=_look(low), placed_by="selection",  # type: ignore[arg-type]
+    )  # fmt: skip
+
+
+def explorer_hints(intent: Intent, volume=None) -> list[dict]:
+    """The hints the Explorer takes for ``intent`` on ``volume`` (empty: none understood)."""
+    th = intent_hints(intent, volume)
+    return [h.to_explorer() for h in th.hints if h.center is not None or intent.kind == "edit"]
