@@ -29,6 +29,7 @@ COMMAND_MODULES = [
     "intuitf.cli.render_cmds",
     "intuitf.cli.export_cmds",
     "intuitf.cli.optimize_cmds",
+    "intuitf.cli.serve_cmds",
 ]
 
 for _name in COMMAND_MODULES:

@@ -1,0 +1,132 @@
+"""``intuitf serve``: the interactive system in the browser, on this machine."""
+
+from __future__ import annotations
+
+import os
+import socket
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+from intuitf.errors import IntuitfError
+
+console = Console()
+
+LOOPBACK = ("127.0.0.1", "localhost", "::1")
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    """A TCP port nobody listens on now."""
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
+        s.bind((host, 0))
+        return int(s.getsockname()[1])
+
+
+def allowed_hosts(host: str, port: int) -> list[str]:
+    """The Host header values the server answers: loopback names, and ``host`` when given."""
+    out = [f"127.0.0.1:{port}", f"localhost:{port}", f"[::1]:{port}"]
+    if host not in LOOPBACK and host not in ("0.0.0.0", "::"):
+        out.append(f"{host}:{port}")
+    if host in ("0.0.0.0", "::"):
+        out.append(f"{socket.gethostname()}:{port}")
+    return out
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def serve(
+        volumes: Annotated[
+            list[str] | None,
+            typer.Argument(help="Volume files to offer (the phantom is always there)."),
+        ] = None,
+        data: Annotated[
+            Path | None,
+            typer.Option(
+                "--data",
+                help="Offer every volume file in this folder (default: $INTUITF_DATA if set).",
+            ),  # fmt: skip
+        ] = None,
+        evaluator: Annotated[
+            str,
+            typer.Option(
+                "--evaluator",
+                "-e",
+                help="Judge of new runs: metric, openai:MODEL, "
+                "gemini:MODEL, ollama:MODEL, ... or a server URL.",
+            ),  # fmt: skip
+        ] = "metric",
+        runs: Annotated[
+            Path, typer.Option("--runs", help="Folder of the runs (the history).")
+        ] = Path("runs"),
+        port: Annotated[int, typer.Option("--port", help="Port (0: a free one).")] = 0,
+        host: Annotated[
+            str, typer.Option("--host", help="Address to bind (default loopback only).")
+        ] = "127.0.0.1",
+        no_browser: Annotated[
+            bool, typer.Option("--no-browser", help="Do not open a browser.")
+        ] = False,
+        max_upload_mb: Annotated[
+            int, typer.Option("--max-upload-mb", min=1, help="Largest upload (MiB).")
+        ] = 512,
+        max_dim: Annotated[
+            int | None,
+            typer.Option(
+                "--max-dim",
+                metavar="N",
+                help="Downsample volumes to at most N "
+                "voxels per axis (faster views of large data).",
+            ),  # fmt: skip
+        ] = None,
+    ) -> None:
+        """Start the web app: watch runs, steer them, and pick, refine and export results."""
+        import uvicorn
+
+        from intuitf.web.app import create_app
+        from intuitf.web.security import new_token
+
+        if data is None and os.environ.get("INTUITF_DATA"):
+            data = Path(os.environ["INTUITF_DATA"])
+        if data is not None and not data.is_dir():
+            raise IntuitfError(f"--data {data}: no such folder.", "Give a folder of volumes.")
+        for v in volumes or []:
+            if v not in ("phantom", "builtin:phantom") and not Path(v).exists():
+                raise IntuitfError(f"{v}: no such volume file.", "Check the path.")
+        if host not in LOOPBACK:
+            console.print(
+                f"[yellow]warning:[/] binding to {host}: other machines can reach this server "
+                "(the token still guards it; anyone who sees the URL can use it)."
+            )
+        try:
+            port = port or free_port(host if host not in ("0.0.0.0", "::") else "127.0.0.1")
+        except OSError as exc:
+            raise IntuitfError(f"Cannot bind to {host}: {exc.strerror or exc}.") from None
+        token = new_token()
+        app = create_app(
+            runs,
+            list(volumes or []),
+            data,
+            evaluator=evaluator,
+            token=token,
+            allowed_hosts=allowed_hosts(host, port),
+            max_upload_bytes=max_upload_mb * 1024 * 1024,
+            max_dim=max_dim,
+        )
+        shown = "127.0.0.1" if host in ("0.0.0.0", "::", "localhost") else host
+        shown = f"[{shown}]" if ":" in shown else shown
+        url = f"http://{shown}:{port}/?token={token}"
+        console.print(f"intuitf is serving [bold]{Path(runs).resolve()}[/] at")
+        console.print(f"    {url}", highlight=False, soft_wrap=True)
+        console.print("Press Ctrl-C to stop (running runs are stopped between matches and kept).")
+        if not no_browser:
+            try:
+                import webbrowser
+
+                webbrowser.open(url)
+            except Exception:  # no browser on this machine: the printed URL is enough
+                pass
+        config = uvicorn.Config(
+            app, host=host, port=port, log_level="warning", ws="auto", lifespan="on"
+        )
+        uvicorn.Server(config).run()

@@ -1,0 +1,323 @@
+"""``create_app``: the FastAPI application of ``intuitf serve``.
+
+The app serves the page (static ES modules under ``web/static``) and a JSON API whose OpenAPI
+schema is the contract with the page. It drives runs only through the Session service
+(:mod:`intuitf.session`): ``RunStore`` for the history, ``Session.open/resume/branch`` for
+runs, the session's events for progress and its view renderer for frames.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import os
+import threading
+from collections import OrderedDict
+from contextlib import asynccontextmanager
+from pathlib import Path
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from intuitf.errors import IntuitfError
+from intuitf.session import RunStore
+from intuitf.web.common import ApiError
+from intuitf.web.runs import RunRegistry
+from intuitf.web.security import DEFAULT_HOSTS, SecurityMiddleware, new_token
+from intuitf.web.uploads import PictureStore
+from intuitf.web.volumes import VolumeCatalog
+
+log = logging.getLogger(__name__)
+
+STATIC_DIR = Path(__file__).parent / "static"
+#: Hidden folder in the runs folder for uploads (RunStore lists only folders with a run.json).
+UPLOADS = ".uploads"
+DEFAULT_MAX_UPLOAD = 512 * 1024 * 1024
+
+#: Evaluator specs the page offers as examples.
+EVALUATOR_EXAMPLES = [
+    "metric",
+    "openai:gpt-4o",
+    "gemini:gemini-2.0-flash",
+    "openrouter:openai/gpt-4o",
+    "ollama:llava",
+    "http://127.0.0.1:8000/v1",
+]
+
+
+class _LRU(OrderedDict):
+    def __init__(self, size: int) -> None:
+        super().__init__()
+        self.size = size
+        self.lock = threading.Lock()
+
+    def get_(self, key):
+        with self.lock:
+            v = self.get(key)
+            if v is not None:
+                self.move_to_end(key)
+            return v
+
+    def put(self, key, value) -> None:
+        with self.lock:
+            self[key] = value
+            self.move_to_end(key)
+            while len(self) > self.size:
+                self.popitem(last=False)
+
+
+class WebState:
+    """What the routes share: the run store, live runs, volumes, uploads and render caches."""
+
+    def __init__(
+        self,
+        runs_dir: Path,
+        catalog: VolumeCatalog,
+        *,
+        evaluator: str,
+        token: str,
+        max_upload_bytes: int,
+        default_settings: dict | None,
+        sse_keepalive: float,
+        max_live_runs: int,
+    ) -> None:
+        self.runs_dir = runs_dir
+        self.store = RunStore(runs_dir)
+        self.registry = RunRegistry(max_live_runs)
+        self.catalog = catalog
+        self.pictures = PictureStore(runs_dir / UPLOADS / "pictures")
+        self.evaluator = evaluator
+        self.token = token
+        self.max_upload_bytes = max_upload_bytes
+        self.default_settings = dict(default_settings or {})
+        self.sse_keepalive = sse_keepalive
+        self._renderers = _LRU(8)
+        self.candidates = _LRU(512)
+        self.images = _LRU(256)
+        self.create_lock = asyncio.Lock()
+
+    # -- rendering helpers -----------------------------------------------------------------
+    def view_renderer(self, volume, background=(0.0, 0.0, 0.0)):
+        """A :class:`ViewRenderer` of ``volume`` on ``background`` (kept per pair)."""
+        from intuitf.session.views import ViewRenderer
+
+        key = (id(volume), tuple(round(float(c), 4) for c in background))
+        got = self._renderers.get_(key)
+        if got is None or got[0] is not volume:
+            got = (volume, ViewRenderer(volume, background=tuple(background)))
+            self._renderers.put(key, got)
+        return got[1]
+
+    def record(self, name: str) -> dict:
+        """A run's run.json (404 when there is no such run; blocking)."""
+        from intuitf.session import RunDirectory
+
+        try:
+            path = self.store.path_of(name)
+        except IntuitfError:
+            raise ApiError(
+                404, f"There is no run {name[:80]!r}.", "Use a name from the run list."
+            ) from None
+        rd = RunDirectory(path)
+        if not rd.exists():
+            raise ApiError(404, f"There is no run {name[:80]!r}.", "Use a name from the run list.")
+        try:
+            return rd.read_run()
+        except IntuitfError as exc:
+            raise ApiError(422, exc.message, exc.hint) from None
+
+    def run_settings(self, name: str):
+        from intuitf.session import RunSettings
+
+        return RunSettings.from_dict(self.record(name).get("settings", {}))
+
+    def volume_of_run(self, name: str):
+        """The volume of run ``name``: the live session's, else loaded from its spec (blocking)."""
+        live = self.registry.get(name)
+        if live is not None:
+            return live.session.volume
+        from intuitf.session.building import spec_of_record
+
+        record = self.record(name)
+        try:
+            spec = spec_of_record(record)
+        except IntuitfError as exc:
+            raise ApiError(422, exc.message, exc.hint) from None
+        if not spec.volume.source:
+            raise ApiError(
+                409,
+                f"The run {name!r} was made from a volume in memory; its source is unknown.",
+                "Open it from Python with the volume passed in.",
+            )
+        try:
+            return self.catalog.load_spec(spec.volume)
+        except IntuitfError as exc:
+            raise ApiError(422, exc.message, exc.hint) from None
+
+    def candidate(self, qid: str):
+        """The :class:`CandidateInfo` of ``RUN/gGGG-NNN`` (404 if none; blocking)."""
+        from intuitf.session.store import CandidateInfo
+        from intuitf.web.common import parse_qid
+
+        run, cid = parse_qid(qid)
+        got = self.candidates.get_(qid)
+        if got is not None:
+            return got
+        self.record(run)  # 404 for an unknown run
+        try:
+            info = self.store.candidate(qid)
+        except IntuitfError as exc:
+            live = self.registry.get(run)
+            tf = live.session.snapshot().tfs.get(cid) if live is not None else None
+            if tf is None:
+                raise ApiError(404, exc.message, exc.hint) from None
+            snap = live.session.snapshot()  # type: ignore[union-attr]
+            return CandidateInfo(qid, run, cid, int(cid[1 : cid.index('-')]), snap.stage, tf,
+                                 float(snap.ratings.get(cid, float("nan"))), 0)  # fmt: skip
+        self.candidates.put(qid, info)
+        return info
+
+
+def _error_response(status: int, detail: str, hint: str | None = None, **extra) -> JSONResponse:
+    body: dict[str, Any] = {"detail": detail}
+    if hint:
+        body["hint"] = hint
+    body.update(extra)
+    return JSONResponse(body, status_code=status)
+
+
+def create_app(
+    runs_dir: str | os.PathLike,
+    volumes: list[str] | tuple[str, ...] = (),
+    data_dir: str | os.PathLike | None = None,
+    evaluator: str = "metric",
+    token: str | None = None,
+    allowed_hosts: list[str] | tuple[str, ...] | None = None,
+    max_upload_bytes: int = DEFAULT_MAX_UPLOAD,
+    *,
+    max_dim: int | None = None,
+    default_settings: dict | None = None,
+    sse_keepalive: float = 15.0,
+    max_live_runs: int = 4,
+) -> FastAPI:
+    """The intuitf web app over the runs folder ``runs_dir``.
+
+    ``volumes`` are offered beside the built-in phantom and the files under ``data_dir``;
+    ``evaluator`` is the judge a run uses unless its spec names one; ``token`` is the access
+    token (a fresh one if None: read it back from ``app.state.web.token``); ``allowed_hosts``
+    are the Host header values served (``name`` for any port or ``name:port``; default
+    127.0.0.1, localhost and [::1]); ``max_upload_bytes`` limits uploads. ``default_settings``
+    fill in run settings a spec leaves out (tests use small ones).
+    """
+    from intuitf import __version__
+    from intuitf.web import (
+        routes_candidates,
+        routes_info,
+        routes_runs,
+        routes_volumes,
+        view_socket,
+    )
+
+    runs_path = Path(runs_dir).expanduser().resolve()
+    runs_path.mkdir(parents=True, exist_ok=True)
+    token = token or new_token()
+    catalog = VolumeCatalog(
+        list(volumes), data_dir, upload_dir=runs_path / UPLOADS / "volumes", max_dim=max_dim
+    )
+    web = WebState(
+        runs_path,
+        catalog,
+        evaluator=evaluator,
+        token=token,
+        max_upload_bytes=int(max_upload_bytes),
+        default_settings=default_settings,
+        sse_keepalive=float(sse_keepalive),
+        max_live_runs=int(max_live_runs),
+    )
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):
+        web.registry.bind(asyncio.get_running_loop())
+        web.create_lock = asyncio.Lock()
+        try:
+            yield
+        finally:
+            await web.registry.close_all()
+
+    app = FastAPI(
+        title="intuitf",
+        version=__version__,
+        description="Design transfer functions for direct volume rendering: runs, views, history.",
+        lifespan=lifespan,
+    )
+    app.state.web = web
+
+    @app.exception_handler(ApiError)
+    async def _api_error(request: Request, exc: ApiError):
+        return JSONResponse(exc.body(), status_code=exc.status)
+
+    @app.exception_handler(IntuitfError)
+    async def _user_error(request: Request, exc: IntuitfError):
+        return _error_response(422, exc.message, exc.hint)
+
+    @app.exception_handler(RequestValidationError)
+    async def _invalid(request: Request, exc: RequestValidationError):
+        errors = exc.errors()
+        parts = []
+        for err in errors[:5]:
+            loc = ".".join(str(p) for p in err.get("loc", ()) if p != "body") or "request"
+            parts.append(f"{loc}: {err.get('msg', 'invalid')}")
+        return _error_response(
+            422,
+            "The request is not valid: " + "; ".join(parts) + ".",
+            "Fix the fields named above.",
+            errors=[{"loc": list(e.get("loc", ())), "msg": str(e.get("msg", ""))} for e in errors],
+        )
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http(request: Request, exc: StarletteHTTPException):
+        detail = exc.detail if isinstance(exc.detail, str) else "Request refused."
+        headers = getattr(exc, "headers", None)
+        return JSONResponse({"detail": detail}, status_code=exc.status_code, headers=headers)
+
+    @app.exception_handler(Exception)
+    async def _unexpected(request: Request, exc: Exception):  # pragma: no cover - a bug
+        log.exception("unexpected error in %s %s", request.method, request.url.path)
+        return _error_response(
+            500, f"The server failed ({type(exc).__name__}).", "See the server's log."
+        )
+
+    for module in (routes_info, routes_volumes, routes_runs, routes_candidates, view_socket):
+        app.include_router(module.router)
+
+    @app.get("/", include_in_schema=False)
+    async def index():
+        page = STATIC_DIR / "index.html"
+        if page.is_file():
+            return FileResponse(page, media_type="text/html")
+        return HTMLResponse(
+            "<!doctype html><title>intuitf</title><h1>intuitf</h1>"
+            "<p>The page's files are missing from this install; the API is at /docs.</p>"
+        )
+
+    @app.get("/static/{path:path}", include_in_schema=False)
+    async def static(path: str):
+        root = STATIC_DIR.resolve()
+        target = (root / path).resolve()
+        if not target.is_file() or root not in target.parents:
+            raise ApiError(404, "No such file.")
+        media = {".js": "text/javascript", ".mjs": "text/javascript", ".css": "text/css",
+                 ".svg": "image/svg+xml", ".html": "text/html", ".json": "application/json",
+                 ".png": "image/png", ".woff2": "font/woff2"}.get(target.suffix)  # fmt: skip
+        return FileResponse(target, media_type=media)
+
+    app.add_middleware(
+        SecurityMiddleware,
+        token=token,
+        allowed_hosts=list(allowed_hosts) if allowed_hosts else list(DEFAULT_HOSTS),
+        max_body_bytes=int(max_upload_bytes) + 1024 * 1024,
+    )
+    return app

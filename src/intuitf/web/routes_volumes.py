@@ -1,0 +1,122 @@
+"""Volumes by id (list, upload, histogram), picture uploads, and the hand-edit TF preview."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any
+
+from fastapi import APIRouter, File, Request, UploadFile
+from fastapi.responses import Response
+from pydantic import BaseModel, Field
+
+from intuitf.session.scheduler import INTERACTIVE, render_scheduler
+from intuitf.web.common import (
+    ApiError,
+    background_of,
+    camera_of,
+    check_size,
+    encode_png,
+    state,
+    tf_of,
+)
+
+router = APIRouter(prefix="/api", tags=["volumes"])
+
+PNG = {200: {"content": {"image/png": {}}, "description": "A PNG picture."}}
+
+
+class VolumeOut(BaseModel):
+    id: str
+    name: str
+    shape: list[int] | None = Field(None, description="[x, y, z]; null until first loaded")
+    dtype: str | None = None
+    source: str
+
+
+class Material(BaseModel):
+    mean: float
+    width: float
+    fraction: float
+
+
+class Histogram(BaseModel):
+    counts: list[float]
+    value_range: list[float]
+    materials: list[Material]
+
+
+class UploadOut(BaseModel):
+    id: str
+    width: int
+    height: int
+
+
+class PreviewIn(BaseModel):
+    volume: str
+    tf: dict[str, Any]
+    camera: dict[str, Any] | None = None
+    size: int = 256
+    shaded: bool = True
+    background: list[float] | None = None
+
+
+async def read_limited(upload: UploadFile, limit: int) -> bytes:
+    """The upload's bytes, or 413 as soon as it passes ``limit``."""
+    chunks, total = [], 0
+    while True:
+        chunk = await upload.read(1024 * 1024)
+        if not chunk:
+            break
+        total += len(chunk)
+        if total > limit:
+            raise ApiError(
+                413,
+                f"The upload is larger than the limit of {limit / (1024 * 1024):.0f} MiB.",
+                "Upload a smaller file, or start the server with a larger --max-upload-mb.",
+            )
+        chunks.append(chunk)
+    return b"".join(chunks)
+
+
+@router.get("/volumes", response_model=list[VolumeOut])
+def list_volumes(request: Request) -> list[dict]:
+    return [e.to_dict() for e in state(request).catalog.entries()]
+
+
+@router.post("/volumes", response_model=VolumeOut, status_code=201)
+async def upload_volume(request: Request, file: UploadFile = File(...)) -> dict:
+    web = state(request)
+    data = await read_limited(file, web.max_upload_bytes)
+    entry = await asyncio.to_thread(web.catalog.save_upload, file.filename or "", data)
+    return entry.to_dict()
+
+
+@router.get("/volumes/{volume_id}/histogram", response_model=Histogram)
+async def histogram(request: Request, volume_id: str) -> dict:
+    web = state(request)
+    web.catalog.get(volume_id)  # 404 before any work
+    return await asyncio.to_thread(web.catalog.histogram, volume_id)
+
+
+@router.post("/uploads", response_model=UploadOut, status_code=201)
+async def upload_picture(request: Request, file: UploadFile = File(...)) -> dict:
+    web = state(request)
+    data = await read_limited(file, min(web.max_upload_bytes, 64 * 1024 * 1024))
+    return await asyncio.to_thread(web.pictures.save, data)
+
+
+@router.post("/tf/preview", response_class=Response, responses=PNG)
+async def tf_preview(request: Request, body: PreviewIn) -> Response:
+    web = state(request)
+    entry = web.catalog.get(body.volume)
+    tf = tf_of(body.tf)
+    camera = camera_of(body.camera)
+    size = check_size(body.size)
+    bg = background_of(body.background)
+    volume = await asyncio.to_thread(web.catalog.load, entry.id)
+    vr = web.view_renderer(volume, bg)
+    image = await render_scheduler().run(
+        lambda: vr.view(tf, camera, size, body.shaded), INTERACTIVE
+    )
+    data = await asyncio.to_thread(encode_png, image)
+    return Response(data, media_type="image/png", headers={"Cache-Control": "no-store"})

@@ -1,0 +1,188 @@
+"""``/api/view``: frames of a volume view over one WebSocket, newest request wins.
+
+The page sends a request whenever the camera (or TF, size, shading) changes::
+
+    {req, target: {candidate: "RUN/gGGG-NNN"} | {volume: ID, tf: TF JSON},
+     camera, size, shaded, background, quality: "drag" | "full", highlight?: [indices]}
+
+and gets back a text header ``{req, width, height, format, ms, quality}`` followed at once by
+one binary message with the picture (JPEG for ``drag`` at half size, at most 128 pixels; PNG
+for ``full``). One frame is in flight per socket: a request that arrives while a frame
+renders waits in a single slot, replacing any request already waiting there, so a fast drag
+renders the first camera and then the newest, never a queue of stale ones. Renders go
+through the process's render scheduler at interactive priority, ahead of the tournament's.
+Errors come back as ``{req, error, hint}``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+from typing import Any
+
+from fastapi import APIRouter, WebSocket, WebSocketDisconnect
+
+from intuitf.errors import IntuitfError
+from intuitf.session.scheduler import INTERACTIVE, render_scheduler
+from intuitf.web.common import (
+    ApiError,
+    background_of,
+    camera_of,
+    check_size,
+    encode_jpeg,
+    encode_png,
+    outline,
+    tf_of,
+)
+
+router = APIRouter()
+
+#: Largest side of a frame while dragging.
+DRAG_MAX = 128
+
+
+class ViewSocket:
+    """One socket's state: the frame in flight and the one request waiting for it."""
+
+    def __init__(self, ws: WebSocket, web) -> None:
+        self.ws = ws
+        self.web = web
+        self.busy = False
+        self.pending: dict | None = None
+        self.send_lock = asyncio.Lock()
+        self.task: asyncio.Task | None = None
+        self._tfs: dict[str, Any] = {}
+        #: What was rendered (request numbers), for tests and benchmarks.
+        self.rendered: list[int] = []
+
+    async def serve(self) -> None:
+        try:
+            while True:
+                message = await self.ws.receive()
+                if message["type"] == "websocket.disconnect":
+                    break
+                text = message.get("text")
+                if text is None:
+                    await self._error(None, "Send requests as JSON text.", None)
+                    continue
+                try:
+                    req = json.loads(text)
+                    if not isinstance(req, dict):
+                        raise ValueError("not an object")
+                except ValueError:
+                    await self._error(None, "A request must be a JSON object.", None)
+                    continue
+                if self.busy:
+                    self.pending = req  # newest wins: an older waiting request is dropped
+                else:
+                    self.busy = True
+                    self.task = asyncio.create_task(self._render_loop(req))
+        except WebSocketDisconnect:
+            pass
+        finally:
+            if self.task is not None:
+                self.task.cancel()
+
+    async def _render_loop(self, req: dict) -> None:
+        try:
+            while req is not None:
+                try:
+                    header, data = await self._frame(req)
+                    async with self.send_lock:
+                        await self.ws.send_text(json.dumps(header))
+                        await self.ws.send_bytes(data)
+                except ApiError as exc:
+                    await self._error(req.get("req"), exc.detail, exc.hint)
+                except IntuitfError as exc:
+                    await self._error(req.get("req"), exc.message, exc.hint)
+                req, self.pending = self.pending, None
+        except (WebSocketDisconnect, RuntimeError, asyncio.CancelledError):
+            pass
+        finally:
+            self.busy = False
+
+    async def _error(self, req, error: str, hint: str | None) -> None:
+        async with self.send_lock:
+            try:
+                await self.ws.send_text(json.dumps({"req": req, "error": error, "hint": hint}))
+            except (WebSocketDisconnect, RuntimeError):
+                pass
+
+    async def _target(self, target: Any):
+        """(tf, volume) of a request's target."""
+        web = self.web
+        if not isinstance(target, dict):
+            raise ApiError(422, "A target is {candidate: RUN/gGGG-NNN} or {volume: ID, tf: ...}.")
+        if "candidate" in target:
+            qid = str(target["candidate"])
+            got = self._tfs.get(qid)
+            if got is None:
+                info = await asyncio.to_thread(web.candidate, qid)
+                volume = await asyncio.to_thread(web.volume_of_run, info.run)
+                got = self._tfs[qid] = (info.tf, volume)
+            return got
+        if "volume" in target:
+            entry = web.catalog.get(target["volume"])
+            tf = tf_of(target.get("tf"))
+            volume = await asyncio.to_thread(web.catalog.load, entry.id)
+            return tf, volume
+        raise ApiError(422, "A target is {candidate: RUN/gGGG-NNN} or {volume: ID, tf: ...}.")
+
+    async def _frame(self, req: dict) -> tuple[dict, bytes]:
+        t0 = time.perf_counter()
+        quality = req.get("quality", "full")
+        if quality not in ("drag", "full"):
+            raise ApiError(422, f"quality must be 'drag' or 'full', got {quality!r}.")
+        try:
+            size = check_size(req.get("size", 256))
+        except (TypeError, ValueError):
+            raise ApiError(422, "size must be a whole number of pixels.") from None
+        camera = camera_of(req.get("camera"))
+        shaded = bool(req.get("shaded", True))
+        bg = background_of(req.get("background"))
+        highlight = req.get("highlight") or []
+        if not isinstance(highlight, list) or not all(isinstance(i, int) for i in highlight):
+            raise ApiError(422, "highlight is a list of Gaussian indices.")
+        tf, volume = await self._target(req.get("target"))
+        vr = self.web.view_renderer(volume, bg)
+        if quality == "drag":
+            size = min(DRAG_MAX, max(16, size // 2))
+            image = await render_scheduler().run(
+                lambda: vr.view(tf, camera, size, shaded), INTERACTIVE
+            )
+            data, fmt = await asyncio.to_thread(encode_jpeg, image), "jpeg"
+        else:
+            image = await render_scheduler().run(
+                lambda: _full(vr, tf, camera, size, shaded, highlight), INTERACTIVE
+            )
+            data, fmt = await asyncio.to_thread(encode_png, image), "png"
+        self.rendered.append(req.get("req"))
+        header = {
+            "req": req.get("req"),
+            "width": int(image.shape[1]),
+            "height": int(image.shape[0]),
+            "format": fmt,
+            "ms": round((time.perf_counter() - t0) * 1000.0, 1),
+            "quality": quality,
+        }
+        return header, data
+
+
+def _full(vr, tf, camera, size: int, shaded: bool, highlight: list[int]):
+    """A still from the view's sample cache (shared with a click's pick that follows)."""
+    from intuitf.session.views import VISIBLE_SHARE
+
+    cache = vr.sample_cache(camera, size, shaded)
+    image = cache.render(tf)
+    valid = [i for i in highlight if 0 <= i < len(tf)]
+    if valid:
+        att = cache.attribution(tf)
+        image = outline(image, (att[valid] >= VISIBLE_SHARE).any(axis=0))
+    return image
+
+
+@router.websocket("/api/view")
+async def view(ws: WebSocket) -> None:
+    await ws.accept()
+    await ViewSocket(ws, ws.app.state.web).serve()
