@@ -230,6 +230,85 @@ class RunStore:
                     )
         raise SessionError(f"Run {run!r} has no candidate {cid!r}.", "Pick one from its history.")
 
+    def save_edit(self, parent_qid: str, tf: GaussianTF, base: str = "edit") -> str:
+        """Keep a hand-edited ``tf`` as a new point of the history; its run-qualified id.
+
+        The edit becomes a small run folder ``edit``, ``edit-2``, ... with the parent run's
+        spec (``initial`` = the edited TF, ``parent`` = the candidate it was edited from), the
+        parent's intent pictures, and a journal holding one generation with one candidate
+        (``g000-000``), so :meth:`runs`, :meth:`tree` and :meth:`candidate` list it and a
+        branch or refinement can start from it like from any candidate.
+        """
+        import shutil
+        import time
+
+        from intuitf.session.rundir import atomic_write_json
+
+        parent = self.candidate(parent_qid)
+        prd = RunDirectory(self.path_of(parent.run))
+        record = prd.read_run()
+        self.root.mkdir(parents=True, exist_ok=True)
+        while True:  # a folder no other edit took in the meantime
+            name = self.new_name(base)
+            root = self.path_of(name)
+            try:
+                root.mkdir()
+                break
+            except FileExistsError:
+                continue
+        rd = RunDirectory(root)
+        cid = "g000-000"
+        link = {"run": parent.run, "generation": parent.generation, "candidate": parent.id,
+                "selected": []}  # fmt: skip
+        spec = dict(record.get("spec") or {})
+        if spec:
+            spec.update(name=name, initial=[tf.to_dict()], parent=link)
+        if (prd.root / "intent").is_dir():  # the spec's pictures are relative to the folder
+            shutil.copytree(prd.root / "intent", root / "intent", dirs_exist_ok=True)
+        rd.append_journal({"type": "stage", "generation": 0, "stage": "edit"})
+        rd.append_journal(
+            {
+                "type": "generation",
+                "generation": 0,
+                "stage": "edit",
+                "candidates": [
+                    {
+                        "id": cid,
+                        "tf": tf.to_dict(),
+                        "rating": parent.rating,
+                        "rank": 1,
+                        "origin": "hand edit",
+                        "parents": [parent.qid],
+                    }
+                ],
+                "best_id": cid,
+                "calls": 0,
+                "matches": [],
+                "match_stats": {},
+            }
+        )
+        rd.append_journal(
+            {"type": "end", "generation": 1, "reason": "edited",
+             "message": f"Edited by hand from {parent.qid}.", "cost": {}}
+        )  # fmt: skip
+        atomic_write_json(
+            rd.run_json,
+            {
+                "kind": "edit",
+                "spec": spec,
+                "volume": record.get("volume"),
+                "intent": record.get("intent"),
+                "judge": record.get("judge", ""),
+                "settings": record.get("settings", {}),
+                "plan": [["edit", 1]],
+                "initial": [tf.to_dict()],
+                "parent": link,
+                "versions": record.get("versions"),
+                "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            },
+        )
+        return f"{name}/{cid}"
+
     def render(self, qid: str, size: int | None = None, volume=None):
         """A candidate's rendering from its run's judging camera (uint8 RGB).
 
