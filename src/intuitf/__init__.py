@@ -7,13 +7,42 @@ functions); ``Camera``, ``VolumeRenderer``, ``SampleCache`` (rendering); ``Inten
 loop). Judges and the tournament are in :mod:`intuitf.evaluator`.
 """
 
-from intuitf.errors import IntuitfError
-from intuitf.evaluator.types import Aspect, Intent
-from intuitf.explorer import Candidate, Explorer, make_explorer
-from intuitf.render import Camera, SampleCache, VolumeRenderer
-from intuitf.session import RunSettings, Session
-from intuitf.tf import Gaussian, GaussianTF, default_tf, load_tf, save_tf
-from intuitf.volume import Volume, load_volume, phantom
+from typing import TYPE_CHECKING
+
+from intuitf._lazy import lazy_exports
+
+if TYPE_CHECKING:  # the names below, for type checkers and editors
+    from intuitf.errors import IntuitfError
+    from intuitf.evaluator.types import Aspect, Intent
+    from intuitf.explorer import Candidate, Explorer, make_explorer
+    from intuitf.render import Camera, SampleCache, VolumeRenderer
+    from intuitf.session import RunSettings, Session
+    from intuitf.tf import Gaussian, GaussianTF, default_tf, load_tf, save_tf
+    from intuitf.volume import Volume, load_volume, phantom
+
+_EXPORTS = {
+    "IntuitfError": "intuitf.errors",
+    "Aspect": "intuitf.evaluator.types",
+    "Intent": "intuitf.evaluator.types",
+    "Candidate": "intuitf.explorer",
+    "Explorer": "intuitf.explorer",
+    "make_explorer": "intuitf.explorer",
+    "Camera": "intuitf.render",
+    "SampleCache": "intuitf.render",
+    "VolumeRenderer": "intuitf.render",
+    "RunSettings": "intuitf.session",
+    "Session": "intuitf.session",
+    "Gaussian": "intuitf.tf",
+    "GaussianTF": "intuitf.tf",
+    "default_tf": "intuitf.tf",
+    "load_tf": "intuitf.tf",
+    "save_tf": "intuitf.tf",
+    "Volume": "intuitf.volume",
+    "load_volume": "intuitf.volume",
+    "phantom": "intuitf.volume",
+}
+
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 __version__ = "0.1.0"
 

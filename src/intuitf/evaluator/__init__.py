@@ -1,18 +1,60 @@
 """intuitf.evaluator."""
 
-# Model judge, aspects and its plumbing (explicit re-exports).
-from intuitf.evaluator.agreement import agreement_score as agreement_score
-from intuitf.evaluator.aspects import AspectCatalogue as AspectCatalogue
-from intuitf.evaluator.aspects import aspects_for as aspects_for
-from intuitf.evaluator.aspects import aspects_for_intent as aspects_for_intent
-from intuitf.evaluator.aspects import load_aspects as load_aspects
-from intuitf.evaluator.budget import Budget as Budget
-from intuitf.evaluator.cache import VerdictCache as VerdictCache
-from intuitf.evaluator.factory import make_judge as make_judge
-from intuitf.evaluator.metric import MetricJudge as MetricJudge
-from intuitf.evaluator.mllm import MLLMJudge as MLLMJudge
-from intuitf.evaluator.pricing import PriceTable as PriceTable
-from intuitf.evaluator.providers import PROVIDERS as PROVIDERS
-from intuitf.evaluator.tournament import MatchRecord as MatchRecord
-from intuitf.evaluator.tournament import SwissTournament as SwissTournament
-from intuitf.evaluator.tournament import TournamentResult as TournamentResult
+from typing import TYPE_CHECKING
+
+from intuitf._lazy import lazy_exports
+
+if TYPE_CHECKING:  # the names below, for type checkers and editors
+    from intuitf.evaluator.agreement import agreement_score as agreement_score
+    from intuitf.evaluator.aspects import AspectCatalogue as AspectCatalogue
+    from intuitf.evaluator.aspects import aspects_for as aspects_for
+    from intuitf.evaluator.aspects import aspects_for_intent as aspects_for_intent
+    from intuitf.evaluator.aspects import load_aspects as load_aspects
+    from intuitf.evaluator.budget import Budget as Budget
+    from intuitf.evaluator.cache import VerdictCache as VerdictCache
+    from intuitf.evaluator.factory import make_judge as make_judge
+    from intuitf.evaluator.metric import MetricJudge as MetricJudge
+    from intuitf.evaluator.mllm import MLLMJudge as MLLMJudge
+    from intuitf.evaluator.pricing import PriceTable as PriceTable
+    from intuitf.evaluator.providers import PROVIDERS as PROVIDERS
+    from intuitf.evaluator.tournament import MatchRecord as MatchRecord
+    from intuitf.evaluator.tournament import SwissTournament as SwissTournament
+    from intuitf.evaluator.tournament import TournamentResult as TournamentResult
+
+_EXPORTS = {
+    "agreement_score": "intuitf.evaluator.agreement",
+    "AspectCatalogue": "intuitf.evaluator.aspects",
+    "aspects_for": "intuitf.evaluator.aspects",
+    "aspects_for_intent": "intuitf.evaluator.aspects",
+    "load_aspects": "intuitf.evaluator.aspects",
+    "Budget": "intuitf.evaluator.budget",
+    "VerdictCache": "intuitf.evaluator.cache",
+    "make_judge": "intuitf.evaluator.factory",
+    "MetricJudge": "intuitf.evaluator.metric",
+    "MLLMJudge": "intuitf.evaluator.mllm",
+    "PriceTable": "intuitf.evaluator.pricing",
+    "PROVIDERS": "intuitf.evaluator.providers",
+    "MatchRecord": "intuitf.evaluator.tournament",
+    "SwissTournament": "intuitf.evaluator.tournament",
+    "TournamentResult": "intuitf.evaluator.tournament",
+}
+
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
+
+__all__ = [
+    "AspectCatalogue",
+    "Budget",
+    "MLLMJudge",
+    "MatchRecord",
+    "MetricJudge",
+    "PROVIDERS",
+    "PriceTable",
+    "SwissTournament",
+    "TournamentResult",
+    "VerdictCache",
+    "agreement_score",
+    "aspects_for",
+    "aspects_for_intent",
+    "load_aspects",
+    "make_judge",
+]

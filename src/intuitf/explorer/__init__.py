@@ -6,40 +6,78 @@ algorithm (``"ga"``), the authors' GA settings (``"paper-ga"``), CMA-ES (``"cmae
 random search (``"random"``).
 """
 
-from intuitf.explorer.base import BaseExplorer
-from intuitf.explorer.bounds import Bounds, hsl_to_rgb, rgb_to_hsl
-from intuitf.explorer.candidate import Candidate
-from intuitf.explorer.cmaes import CMAExplorer
-from intuitf.explorer.factory import METHODS, explorer_from_state, make_explorer
-from intuitf.explorer.ga import Explorer
-from intuitf.explorer.genome import decode, encode, near_duplicate
-from intuitf.explorer.operators import MutationParams, crossover, elite_count, mutate, roulette
-from intuitf.explorer.population import random_tf, seeded_tf
-from intuitf.explorer.random_search import RandomSearchExplorer
-from intuitf.explorer.stages import (
-    CUSTOMIZE,
-    INITIALIZE,
-    REFINE,
-    STAGES,
-    Decay,
-    StagePreset,
-    paper_settings,
-)
+from typing import TYPE_CHECKING
+
+from intuitf._lazy import lazy_exports
+
+if TYPE_CHECKING:  # the names below, for type checkers and editors
+    from intuitf.explorer.base import BaseExplorer
+    from intuitf.explorer.bounds import Bounds, hsl_to_rgb, rgb_to_hsl
+    from intuitf.explorer.candidate import Candidate
+    from intuitf.explorer.cmaes import CMAExplorer
+    from intuitf.explorer.factory import METHODS, explorer_from_state, make_explorer
+    from intuitf.explorer.ga import Explorer
+    from intuitf.explorer.genome import decode, encode, near_duplicate
+    from intuitf.explorer.operators import MutationParams, crossover, elite_count, mutate, roulette
+    from intuitf.explorer.population import random_tf, seeded_tf
+    from intuitf.explorer.random_search import RandomSearchExplorer
+    from intuitf.explorer.stages import (
+        CUSTOMIZE,
+        INITIALIZE,
+        REFINE,
+        STAGES,
+        Decay,
+        StagePreset,
+        paper_settings,
+    )
+
+_EXPORTS = {
+    "BaseExplorer": "intuitf.explorer.base",
+    "Bounds": "intuitf.explorer.bounds",
+    "hsl_to_rgb": "intuitf.explorer.bounds",
+    "rgb_to_hsl": "intuitf.explorer.bounds",
+    "Candidate": "intuitf.explorer.candidate",
+    "CMAExplorer": "intuitf.explorer.cmaes",
+    "METHODS": "intuitf.explorer.factory",
+    "explorer_from_state": "intuitf.explorer.factory",
+    "make_explorer": "intuitf.explorer.factory",
+    "Explorer": "intuitf.explorer.ga",
+    "decode": "intuitf.explorer.genome",
+    "encode": "intuitf.explorer.genome",
+    "near_duplicate": "intuitf.explorer.genome",
+    "MutationParams": "intuitf.explorer.operators",
+    "crossover": "intuitf.explorer.operators",
+    "elite_count": "intuitf.explorer.operators",
+    "mutate": "intuitf.explorer.operators",
+    "roulette": "intuitf.explorer.operators",
+    "random_tf": "intuitf.explorer.population",
+    "seeded_tf": "intuitf.explorer.population",
+    "RandomSearchExplorer": "intuitf.explorer.random_search",
+    "CUSTOMIZE": "intuitf.explorer.stages",
+    "INITIALIZE": "intuitf.explorer.stages",
+    "REFINE": "intuitf.explorer.stages",
+    "STAGES": "intuitf.explorer.stages",
+    "Decay": "intuitf.explorer.stages",
+    "StagePreset": "intuitf.explorer.stages",
+    "paper_settings": "intuitf.explorer.stages",
+}
+
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 __all__ = [
-    "CUSTOMIZE",
-    "INITIALIZE",
-    "METHODS",
-    "REFINE",
-    "STAGES",
     "BaseExplorer",
     "Bounds",
     "CMAExplorer",
+    "CUSTOMIZE",
     "Candidate",
     "Decay",
     "Explorer",
+    "INITIALIZE",
+    "METHODS",
     "MutationParams",
+    "REFINE",
     "RandomSearchExplorer",
+    "STAGES",
     "StagePreset",
     "crossover",
     "decode",

@@ -8,10 +8,9 @@ from typing import Any
 from intuitf.explorer.base import BaseExplorer
 from intuitf.explorer.cmaes import CMAExplorer
 from intuitf.explorer.ga import Explorer
+from intuitf.explorer.methods import METHODS  # re-exported
 from intuitf.explorer.random_search import RandomSearchExplorer
 from intuitf.explorer.stages import paper_settings
-
-METHODS = ("ga", "paper-ga", "cmaes", "random")
 
 
 def make_explorer(method: str = "ga", **kwargs: Any) -> BaseExplorer:

@@ -26,8 +26,22 @@ and ``cache.render(tf)`` / ``cache.render_rgba(tf)`` / ``cache.attribution(tf)``
   the CPU (rays can only stop when every TF lets them), so the CPU path keeps one TF per pass.
 """
 
-from intuitf.render.cache import SampleCache
-from intuitf.render.camera import Camera, ViewFrame
-from intuitf.render.renderer import VolumeRenderer
+from typing import TYPE_CHECKING
+
+from intuitf._lazy import lazy_exports
+
+if TYPE_CHECKING:  # the names below, for type checkers and editors
+    from intuitf.render.cache import SampleCache
+    from intuitf.render.camera import Camera, ViewFrame
+    from intuitf.render.renderer import VolumeRenderer
+
+_EXPORTS = {
+    "SampleCache": "intuitf.render.cache",
+    "Camera": "intuitf.render.camera",
+    "ViewFrame": "intuitf.render.camera",
+    "VolumeRenderer": "intuitf.render.renderer",
+}
+
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 __all__ = ["Camera", "SampleCache", "ViewFrame", "VolumeRenderer"]

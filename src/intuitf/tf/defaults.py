@@ -5,8 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
-from scipy.signal import find_peaks
 
 from intuitf.tf.gaussian import WIDTH_RANGE, Gaussian, GaussianTF
 
@@ -29,6 +27,9 @@ def background_cutoff(counts: np.ndarray) -> float:
     """
     c = counts.astype(np.float64)
     n = c.size
+    from scipy.ndimage import gaussian_filter1d
+    from scipy.signal import find_peaks
+
     logc = gaussian_filter1d(np.log1p(c), 2.0)
     if c[: max(1, n // 10)].sum() >= 0.2 * c.sum():
         first = int(np.argmax(logc[: max(2, n // 4)]))
@@ -59,6 +60,9 @@ def find_materials(counts: np.ndarray, max_materials: int = 5) -> list[Material]
     if total <= 0:
         fg = c.copy()
         total = fg.sum()
+    from scipy.ndimage import gaussian_filter1d
+    from scipy.signal import find_peaks
+
     logc = gaussian_filter1d(np.log1p(fg), max(1.0, n / 128))
     peaks, props = find_peaks(logc, prominence=0.3)
     mats: list[Material] = []
