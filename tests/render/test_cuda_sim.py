@@ -117,120 +117,188 @@ def _tfs(n: int, seed: int):
     ]
 
 
-def _simulator_checks() -> None:
-    from numba.core import config
+def _bytes_read_reference(cpu_cache, renderer, tfs) -> np.ndarray:
+    """What the GPU composite reads per TF, from the CPU cache's samples: per ray, runs of 32
+    samples from its start, skipped when the LUT is empty over the run's value range."""
+    item = cpu_cache.samples.dtype.itemsize
+    per_sample = item + (2 if renderer.shading else 0)
+    out = []
+    for tf in tfs:
+        alpha = renderer.lut(tf)[:, 3]
+        occ = np.concatenate(([0], np.cumsum(alpha > 0)))
+        total = 0
+        for p in range(len(cpu_cache.offsets) - 1):
+            ray = cpu_cache.samples[cpu_cache.offsets[p] : cpu_cache.offsets[p + 1]]
+            tr = np.float32(1.0)
+            for s in range(0, len(ray), 32):
+                seg = ray[s : s + 32]
+                total += 2 * item
+                if occ[int(seg.max()) + 1] == occ[int(seg.min())]:
+                    continue
+                stop = False
+                for q in seg:
+                    total += per_sample
+                    if alpha[q] > 0:
+                        tr = np.float32(tr * (np.float32(1.0) - alpha[q]))
+                        if tr < np.float32(1.0 / 255.0):
+                            stop = True
+                            break
+                if stop:
+                    break
+        out.append(total)
+    return np.array(out, dtype=np.int64)
 
-    assert config.ENABLE_CUDASIM, "run with NUMBA_ENABLE_CUDASIM=1 set before numba is imported"
-    from intuitf.render import Camera, VolumeRenderer
-    from intuitf.render.cuda_backend import CudaSampleCache
-    from intuitf.tf import Gaussian, GaussianTF
 
-    assert select_device("cuda") == "cuda"
-    assert select_device("auto") == "cpu", "auto must never pick the simulator"
+class Checks:
+    """Collects named pass/fail checks, printing each, so one run reports every failure."""
 
-    failures: list[str] = []
+    def __init__(self) -> None:
+        self.failures: list[str] = []
 
-    def check(ok: bool, what: str) -> None:
-        print(("ok   " if ok else "FAIL ") + what)
+    def __call__(self, ok: bool, what: str) -> None:
+        print(("ok   " if ok else "FAIL ") + what, flush=True)
         if not ok:
-            failures.append(what)
+            self.failures.append(what)
 
-    def rgb_close(name: str, a: np.ndarray, b: np.ndarray, max_levels: int = 2) -> None:
+    def rgb(self, name: str, a: np.ndarray, b: np.ndarray, max_levels: int | None = 2) -> None:
+        """8-bit pictures: the VTK tests' tolerance (mean under 2/255, PSNR over 40 dB), tighter
+        where asked (mean under 0.5/255, no pixel more than ``max_levels`` apart)."""
         d = np.abs(a.astype(np.int16) - b.astype(np.int16))
         mse = float(np.mean(d.astype(np.float64) ** 2))
         psnr = 99.0 if mse == 0 else 10 * np.log10(255.0**2 / mse)
-        ok = a.shape == b.shape and d.mean() < 0.5 and psnr > 40 and d.max() <= max_levels
-        check(ok, f"{name}: mean {d.mean():.3f}/255, max {d.max()}, PSNR {psnr:.1f} dB")
+        ok = a.shape == b.shape and d.mean() < 2.0 and psnr > 40
+        if max_levels is not None:
+            ok = ok and d.mean() < 0.5 and d.max() <= max_levels
+        self(ok, f"{name}: mean {d.mean():.3f}/255, max {d.max()}, PSNR {psnr:.1f} dB")
 
-    def float_close(name: str, a: np.ndarray, b: np.ndarray, tol: float = 4e-3) -> None:
+    def close(self, name: str, a: np.ndarray, b: np.ndarray, tol: float = 4e-3) -> None:
         # float32 on the GPU, float64 in parts of the CPU kernels: a value on a rounding
         # boundary may land on the neighbouring LUT entry, moving a pixel by well under 1/255.
         d = np.abs(a - b)
         ok = a.shape == b.shape and d.max() < tol and d.mean() < 2e-4
-        check(ok, f"{name}: max |diff| {d.max():.2e}, mean {d.mean():.1e}")
+        self(ok, f"{name}: max |diff| {d.max():.2e}, mean {d.mean():.1e}")
 
-    cameras = {
-        "orthographic": Camera(azimuth=30, elevation=20, projection="orthographic"),
-        "perspective": Camera(azimuth=-65, elevation=35, roll=10, zoom=1.3, pan=(0.05, -0.1)),
-    }
-    sizes = {"orthographic": 16, "perspective": (13, 10)}  # 13×10: partial 8×4 tiles
+
+CAMERAS = {
+    "orthographic": dict(azimuth=30, elevation=20, projection="orthographic"),
+    "perspective": dict(azimuth=-65, elevation=35, roll=10, zoom=1.3, pan=(0.05, -0.1)),
+}
+
+
+def _compare(check: Checks, vol, cam_name: str, size, shading: bool, strict: bool) -> None:
+    """GPU (device="cuda") against CPU pictures, caches, attribution, picks, feature views."""
+    from intuitf.render import Camera, VolumeRenderer
+    from intuitf.render.cuda_backend import CudaSampleCache
+    from intuitf.tf import Gaussian, GaussianTF
+
+    cam = Camera(**CAMERAS[cam_name])
+    levels = 2 if strict else None
+    tol = 4e-3 if strict else 2e-2
+    tag = f"{vol.name} {cam_name} {'shaded' if shading else 'unshaded'}"
+    kw = dict(size=size, shading=shading, background=(0.1, 0.2, 0.3))
+    cpu = VolumeRenderer(vol, device="cpu", **kw)
+    gpu = VolumeRenderer(vol, device="cuda", **kw)
+    check(gpu.device == "cuda" and cpu.device == "cpu", f"{tag}: devices")
+    tfs = _tfs(3, seed=len(tag))
+    # Direct ray marching: float RGBA and 8-bit, interpolated and nearest LUT.
+    if strict:
+        check.close(f"{tag} march rgba", gpu.render_rgba(tfs[0], cam), cpu.render_rgba(tfs[0], cam))
+        check.close(
+            f"{tag} march nearest",
+            gpu.render_rgba(tfs[1], cam, nearest=True),
+            cpu.render_rgba(tfs[1], cam, nearest=True),
+        )
+    check.rgb(f"{tag} march rgb8", gpu.render(tfs[2], cam), cpu.render(tfs[2], cam), levels)
     invisible = GaussianTF((Gaussian(mean=0.99, width=0.002, height=1e-9, color=(1, 0, 0)),))
+    empty = gpu.render(invisible, cam)
+    check(
+        bool(np.all(empty == empty[0, 0]) and np.all(empty == cpu.render(invisible, cam))),
+        f"{tag}: invisible TF gives the background",
+    )
+    # Sample cache: same samples, a population in one launch.
+    gc = gpu.sample_cache(cam)
+    cc = cpu.sample_cache(cam)
+    check(isinstance(gc, CudaSampleCache), f"{tag}: GPU cache type")
+    check(
+        abs(gc.n_samples - cc.n_samples) <= max(2, cc.n_samples // 200),
+        f"{tag}: samples {gc.n_samples} (GPU) vs {cc.n_samples} (CPU)",
+    )
+    check(gc.samples.dtype == cc.samples.dtype, f"{tag}: sample dtype")
+    many = gc.render_many(tfs)
+    check(len(many) == 3, f"{tag}: render_many returns one picture per TF")
+    for k, (img, tf) in enumerate(zip(many, tfs, strict=True)):
+        check.rgb(f"{tag} cache candidate {k}", img, cc.render(tf), levels)
+        check(np.array_equal(img, gc.render(tf)), f"{tag}: batch = single ({k})")
+    check.close(f"{tag} cache rgba", gc.render_rgba(tfs[1]), cc.render_rgba(tfs[1]), tol)
+    check.close(
+        f"{tag} cache vs march nearest",
+        gc.render_rgba(tfs[2]),
+        gpu.render_rgba(tfs[2], cam, nearest=True),
+        tol + (2e-3 if shading else 0.0),  # shading terms rounded to 1/255
+    )
+    if strict:  # the reference walks every ray in Python
+        expected = _bytes_read_reference(cc, gpu, tfs)
+        got = gc.bytes_read(tfs)
+        check(
+            bool(np.all(np.abs(got - expected) <= 0.02 * expected + 64)),
+            f"{tag}: bytes read {got.tolist()} vs {expected.tolist()} (reference)",
+        )
+    rmany = gpu.render_many(tfs, cam)
+    check(
+        all(np.array_equal(a, b) for a, b in zip(rmany, many, strict=True)),
+        f"{tag}: renderer.render_many",
+    )
+    # Attribution, picking and feature views.
+    check.close(f"{tag} attribution", gc.attribution(tfs[0]), cc.attribution(tfs[0]), tol)
+    alpha = cc.render_rgba(tfs[0])[..., 3]
+    ys, xs = np.nonzero(alpha > 0.05)
+    at = np.linspace(0, len(xs) - 1, 6).astype(int) if len(xs) else []
+    for x, y in [(int(xs[i]), int(ys[i])) for i in at] + [(0, 0)]:
+        for radius in (0, 2):
+            pg = gc.pick(tfs[0], x, y, radius=radius)
+            pc = cc.pick(tfs[0], x, y, radius=radius)
+            same = [i for i, _ in pg] == [i for i, _ in pc] and all(
+                abs(a - b) < 1e-3 for (_, a), (_, b) in zip(pg, pc, strict=True)
+            )
+            check(same, f"{tag}: pick ({x}, {y}) r={radius}: {pg} vs {pc}")
+    check.rgb(
+        f"{tag} feature view",
+        gc.render_feature(tfs[0], [0, 2]),
+        cc.render_feature(tfs[0], [0, 2]),
+        levels,
+    )
+
+
+def _simulator_checks() -> None:
+    from numba.core import config
+
+    assert config.ENABLE_CUDASIM, "run with NUMBA_ENABLE_CUDASIM=1 set before numba is imported"
+    assert select_device("cuda") == "cuda"
+    assert select_device("auto") == "cpu", "auto must never pick the simulator"
+    check = Checks()
+    sizes = {"orthographic": 16, "perspective": (13, 10)}  # 13×10: partial 8×4 tiles
     for vol in _volumes():
-        for cam_name, cam in cameras.items():
+        for cam_name, size in sizes.items():
             for shading in (False, True):
-                tag = f"{vol.name} {cam_name} {'shaded' if shading else 'unshaded'}"
-                kw = dict(size=sizes[cam_name], shading=shading, background=(0.1, 0.2, 0.3))
-                cpu = VolumeRenderer(vol, device="cpu", **kw)
-                gpu = VolumeRenderer(vol, device="cuda", **kw)
-                check(gpu.device == "cuda" and cpu.device == "cpu", f"{tag}: devices")
-                tfs = _tfs(3, seed=len(tag))
-                # Direct ray marching: float RGBA and 8-bit, interpolated and nearest LUT.
-                float_close(
-                    f"{tag} march rgba", gpu.render_rgba(tfs[0], cam), cpu.render_rgba(tfs[0], cam)
-                )
-                float_close(
-                    f"{tag} march nearest",
-                    gpu.render_rgba(tfs[1], cam, nearest=True),
-                    cpu.render_rgba(tfs[1], cam, nearest=True),
-                )
-                rgb_close(f"{tag} march rgb8", gpu.render(tfs[2], cam), cpu.render(tfs[2], cam))
-                empty = gpu.render(invisible, cam)
-                check(
-                    bool(
-                        np.all(empty == empty[0, 0]) and np.all(empty == cpu.render(invisible, cam))
-                    ),
-                    f"{tag}: invisible TF gives the background",
-                )
-                # Sample cache: same samples, a population in one launch.
-                gc = gpu.sample_cache(cam)
-                cc = cpu.sample_cache(cam)
-                check(isinstance(gc, CudaSampleCache), f"{tag}: GPU cache type")
-                check(
-                    abs(gc.n_samples - cc.n_samples) <= max(2, cc.n_samples // 200),
-                    f"{tag}: samples {gc.n_samples} (GPU) vs {cc.n_samples} (CPU)",
-                )
-                check(gc.samples.dtype == cc.samples.dtype, f"{tag}: sample dtype")
-                many = gc.render_many(tfs)
-                check(len(many) == 3, f"{tag}: render_many returns one picture per TF")
-                for k, (img, tf) in enumerate(zip(many, tfs, strict=True)):
-                    rgb_close(f"{tag} cache candidate {k}", img, cc.render(tf))
-                    check(np.array_equal(img, gc.render(tf)), f"{tag}: batch = single ({k})")
-                float_close(f"{tag} cache rgba", gc.render_rgba(tfs[1]), cc.render_rgba(tfs[1]))
-                float_close(
-                    f"{tag} cache vs march nearest",
-                    gc.render_rgba(tfs[2]),
-                    gpu.render_rgba(tfs[2], cam, nearest=True),
-                    tol=6e-3 if shading else 4e-3,  # shading terms rounded to 1/255
-                )
-                rmany = gpu.render_many(tfs, cam)
-                check(
-                    all(np.array_equal(a, b) for a, b in zip(rmany, many, strict=True)),
-                    f"{tag}: renderer.render_many",
-                )
-                # Attribution, picking and feature views.
-                ga = gc.attribution(tfs[0])
-                ca = cc.attribution(tfs[0])
-                float_close(f"{tag} attribution", ga, ca)
-                alpha = cc.render_rgba(tfs[0])[..., 3]
-                ys, xs = np.nonzero(alpha > 0.05)
-                at = np.linspace(0, len(xs) - 1, 6).astype(int) if len(xs) else []
-                for x, y in [(int(xs[i]), int(ys[i])) for i in at] + [(0, 0)]:
-                    for radius in (0, 2):
-                        pg = gc.pick(tfs[0], x, y, radius=radius)
-                        pc = cc.pick(tfs[0], x, y, radius=radius)
-                        same = [i for i, _ in pg] == [i for i, _ in pc] and all(
-                            abs(a - b) < 1e-3 for (_, a), (_, b) in zip(pg, pc, strict=True)
-                        )
-                        check(same, f"{tag}: pick ({x}, {y}) r={radius}: {pg} vs {pc}")
-                rgb_close(
-                    f"{tag} feature view",
-                    gc.render_feature(tfs[0], [0, 2]),
-                    cc.render_feature(tfs[0], [0, 2]),
-                )
-    if failures:
-        print(f"{len(failures)} simulator check(s) failed")
+                _compare(check, vol, cam_name, size, shading, strict=True)
+    if check.failures:
+        print(f"{len(check.failures)} simulator check(s) failed")
         sys.exit(1)
     print("simulator checks passed")
+
+
+# ---------------------------------------------------------------------------------------------
+# On an NVIDIA GPU (skipped without one): the same checks on real volumes
+# ---------------------------------------------------------------------------------------------
+@pytest.mark.skipif(cuda_unavailable_reason() is not None, reason="no usable NVIDIA GPU")
+@pytest.mark.parametrize("volume_name", ["foot", "tooth"])
+@pytest.mark.parametrize("cam_name", list(CAMERAS))
+@pytest.mark.parametrize("shading", [False, True], ids=["unshaded", "shaded"])
+def test_gpu_agrees_with_cpu_on_real_volumes(volume_name, cam_name, shading, request):
+    check = Checks()
+    vol = request.getfixturevalue(volume_name)
+    _compare(check, vol, cam_name, 128, shading, strict=False)
+    assert not check.failures, "\n".join(check.failures)
 
 
 if __name__ == "__main__":

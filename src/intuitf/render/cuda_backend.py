@@ -275,6 +275,32 @@ class CudaSampleCache(CacheViews):
         """Premultiplied RGBA float32 (H, W, 4) of ``tf``."""
         return self._composite([tf], to8=False)[0]
 
+    def bytes_read(self, tfs: Sequence[GaussianTF]) -> np.ndarray:
+        """Bytes of the cache that rendering each TF reads (with skipping and early stop).
+
+        For bandwidth figures only: samples loaded times their bytes (1 for the value, 2 more
+        for the shading terms), plus each checked segment's (min, max). (K,) int64.
+        """
+        be = self.backend
+        r = self.renderer
+        alphas = np.ascontiguousarray(be.luts(tfs)[:, :, 3])
+        checked = np.zeros(len(alphas), dtype=np.int64)
+        loaded = np.zeros(len(alphas), dtype=np.int64)
+        for a in range(0, len(alphas), 8):
+            alpha = alphas[a : a + 8]
+            k = alpha.shape[0]
+            reads = cuda.to_device(np.zeros((k, be.n_slots, 2), dtype=np.int32))
+            ck.count_reads[k * be.n_blocks, ck.BLOCK](
+                self.counts, self.tile_base, self.samples, self.segmin, self.segmax,
+                cuda.to_device(_occupancy(alpha)), cuda.to_device(alpha), be.t_stop,
+                be.tiles_x, r.width, r.height, reads,
+            )  # fmt: skip
+            sums = reads.copy_to_host().sum(axis=1, dtype=np.int64)
+            checked[a : a + k] = sums[:, 0]
+            loaded[a : a + k] = sums[:, 1]
+        item = self.samples.dtype.itemsize
+        return (loaded * (item + (2 if r.shading else 0)) + checked * 2 * item).astype(np.int64)
+
     def render(self, tf: GaussianTF) -> np.ndarray:
         """RGB uint8 (H, W, 3) of ``tf`` over the renderer's background."""
         return self._composite([tf], to8=True)[0]

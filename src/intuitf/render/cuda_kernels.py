@@ -210,7 +210,7 @@ def _store(out_rgba, out_rgb, to8, bg, c, p, r, g, b, tr):
 # ---------------------------------------------------------------------------------------------
 # Direct ray marcher: K candidates per launch
 # ---------------------------------------------------------------------------------------------
-@cuda.jit(fastmath=True)
+@cuda.jit(fastmath=True, cache=True)
 def march(
     data, grad, shading, vis, bsize, luts, nearest, cam, isp, dt, shade, t_stop, tiles_x, bg,
     to8, out_rgba, out_rgb,
@@ -306,7 +306,7 @@ def march(
 # ---------------------------------------------------------------------------------------------
 # Sample cache: build once per camera
 # ---------------------------------------------------------------------------------------------
-@cuda.jit(fastmath=True)
+@cuda.jit(fastmath=True, cache=True)
 def count_samples(cam, isp, nx, ny, nz, dt, tiles_x, counts, t0s):
     """Samples on each slot's ray (0 for slots outside the picture) and its entry ``t0``."""
     slot = cuda.grid(1)
@@ -324,7 +324,7 @@ def count_samples(cam, isp, nx, ny, nz, dt, tiles_x, counts, t0s):
     t0s[slot] = t0
 
 
-@cuda.jit(fastmath=True)
+@cuda.jit(fastmath=True, cache=True)
 def fill_samples(
     data, grad, shading, cam, isp, dt, nl, shin, tiles_x, counts, t0s, tile_base, samples,
     diffuse, specular, segmin, segmax,
@@ -378,7 +378,7 @@ def fill_samples(
 # ---------------------------------------------------------------------------------------------
 # Sample cache: K candidates per launch
 # ---------------------------------------------------------------------------------------------
-@cuda.jit(fastmath=True)
+@cuda.jit(fastmath=True, cache=True)
 def composite(
     counts, tile_base, samples, diffuse, specular, segmin, segmax, occupied, luts, shading,
     shade, t_stop, tiles_x, width, height, bg, to8, out_rgba, out_rgb,
@@ -438,7 +438,7 @@ def composite(
     _store(out_rgba, out_rgb, to8, bg, c, i * width + j, r, g, b, tr)
 
 
-@cuda.jit(fastmath=True)
+@cuda.jit(fastmath=True, cache=True)
 def attribute(
     counts, tile_base, samples, segmin, segmax, occupied, alpha, share, t_stop, tiles_x,
     width, height, out,
@@ -478,3 +478,49 @@ def attribute(
                         done = True
                         break
         s += 1
+
+
+@cuda.jit(fastmath=True, cache=True)
+def count_reads(
+    counts, tile_base, samples, segmin, segmax, occupied, alpha, t_stop, tiles_x, width, height,
+    reads,
+):  # fmt: skip
+    """For the benchmark's bandwidth figures: what :func:`composite` reads for candidate c.
+
+    ``reads[c, slot]`` = (segment bounds checked, samples loaded) on the slot's ray, following
+    the same skipping and early termination (``alpha`` (K, L) is the corrected LUT alpha).
+    """
+    c, slot = _candidate_slot(alpha.shape[0])
+    if slot >= counts.shape[0]:
+        return
+    i, j = _pixel(slot, tiles_x)
+    if i >= height or j >= width:
+        return
+    n = counts[slot]
+    tile = slot // WARP
+    lane = slot - tile * WARP
+    base = tile_base[tile] + lane
+    sbase = tile_base[tile] // SEG + lane
+    tr = ONE
+    n_seg = (n + SEG - 1) // SEG
+    checked = 0
+    loaded = 0
+    s = 0
+    done = False
+    while s < n_seg and not done:
+        at = sbase + s * WARP
+        lo = int(segmin[at])
+        hi = int(segmax[at])
+        checked += 1
+        if occupied[c, hi + 1] != occupied[c, lo]:
+            for k in range(s * SEG, min(s * SEG + SEG, n)):
+                loaded += 1
+                a = alpha[c, int(samples[base + k * WARP])]
+                if a > ZERO:
+                    tr *= ONE - a
+                    if tr < t_stop:
+                        done = True
+                        break
+        s += 1
+    reads[c, slot, 0] = checked
+    reads[c, slot, 1] = loaded
