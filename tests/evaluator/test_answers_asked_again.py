@@ -49,7 +49,9 @@ def test_an_unusable_answer_is_asked_again_and_decides(oracle_images, kind):
         asked, follow_ups = srv.stats.requests, srv.stats.follow_ups
         # The usable answers are cached under the original questions: a replay costs nothing.
         replay = asyncio.run(all_pairs())
-        assert srv.stats.requests - asked <= 3 * sum(not v.decided for v in verdicts)
+        assert srv.stats.requests - asked <= (1 + judge.answer_retries) * sum(
+            not v.decided for v in verdicts
+        )
         assert all(r.cached for r, v in zip(replay, verdicts, strict=True) if v.decided)
     assert srv.stats.faults[kind] >= 2
     retried = [v for v in verdicts if v.retries]

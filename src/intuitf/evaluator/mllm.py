@@ -8,7 +8,7 @@ with exponential backoff and jitter, honouring ``Retry-After``.
 off) is followed up with a corrective message ("answer only with the JSON object ..."), a
 refusal with a short explanation of the task (once: a second refusal is final), and a "blind"
 answer (the model says it cannot see the images) by sending the question again; at most
-``answer_retries`` times per answer. Only when every try was unusable does the comparison become
+``answer_retries`` times per answer (by default the retry budget, ``max_retries``). Only when every try was unusable does the comparison become
 a *logged tie* (``Verdict.error`` set, the verdict *undecided*, not cached). ``Verdict.retries``
 says how many re-asks a verdict took.
 
@@ -119,7 +119,8 @@ class MLLMJudge:
 
     ``timeout`` is the most one request may take and ``deadline`` the most one answer may take,
     retries of failed requests included (None: ``[judge]`` in the config file, else 30 s and
-    60 s). ``answer_retries`` is how often an unusable answer is asked again.
+    60 s). ``answer_retries`` is how often an unusable answer is asked again (None: as often as
+    a failed request is retried, ``max_retries``).
     """
 
     def __init__(
@@ -146,7 +147,7 @@ class MLLMJudge:
         backoff_max: float = 30.0,
         name: str | None = None,
         deadline: float | None = None,
-        answer_retries: int = 2,
+        answer_retries: int | None = None,
     ) -> None:
         if swap not in ("always", "never", "auto"):
             raise JudgeError(f"Unknown swap mode {swap!r}.", "Use 'always', 'never' or 'auto'.")
@@ -154,6 +155,8 @@ class MLLMJudge:
             raise JudgeError(f"Unknown image layout {compose!r}.", "Use 'parts' or 'side_by_side'.")
         if image_format not in ("png", "jpeg"):
             raise JudgeError(f"Unknown image format {image_format!r}.", "Use 'png' or 'jpeg'.")
+        if answer_retries is None:
+            answer_retries = max_retries
         if timeout is None or deadline is None:
             default_timeout, default_deadline = judge_timeouts()
             timeout = default_timeout if timeout is None else timeout
