@@ -1,0 +1,163 @@
+// intuitf in the browser: boots the views, the top bar (volume, live progress) and the export menu.
+
+import * as api from "./api.js";
+import { readHash, refreshTree, selectRun, setCurrent, startTreePolling } from "./actions.js";
+import { initFeatures } from "./features.js";
+import { initGallery } from "./gallery.js";
+import { initHistory } from "./history.js";
+import { showError, showMessage } from "./messages.js";
+import { initQuery } from "./query.js";
+import { el, fmtSeconds, fmtUsd, on, set, setErrorSink, splitQid, state } from "./state.js";
+import { initTfEditor } from "./tf_editor.js";
+import { initVolumeView } from "./volume_view.js";
+
+const EXPORTS = [
+  ["paraview", "ParaView (.json)"],
+  ["slicer", "3D Slicer (.vp)"],
+  ["vtk", "VTK (.py/.json)"],
+  ["1dt", "ImageVis3D (.1dt)"],
+  ["json", "intuitf TF (.json)"],
+  ["png", "Rendering (.png)"],
+];
+
+async function boot() {
+  api.initAuth();
+  setErrorSink(showError);
+  window.addEventListener("error", (e) => showError(e.error || e.message));
+  window.addEventListener("unhandledrejection", (e) => {
+    e.preventDefault();
+    showError(e.reason);
+  });
+
+  initVolumeView();
+  initTfEditor();
+  initHistory();
+  initGallery();
+  initFeatures();
+  initQuery();
+  initTopbar();
+  initExport();
+
+  try {
+    const [info, volumes] = await Promise.all([api.get("/api/info"), api.get("/api/volumes")]);
+    set({ info, volumes });
+    document.getElementById("version").textContent = `v${info.version || "?"}`;
+    const phantom = volumes.find((v) => v.id === "phantom");
+    set({ volumeId: (phantom || volumes[0] || {}).id || null });
+  } catch (err) {
+    showError(err);
+  }
+  await refreshTree();
+  const { qid, run } = readHash();
+  if (qid && splitQid(qid)) await setCurrent(qid, { follow: false });
+  else if (run) await selectRun(run);
+  else {
+    const latest = newestRun(state.tree);
+    if (latest) await selectRun(latest.name, { follow: latest.status === "running" });
+  }
+  startTreePolling();
+  document.body.classList.add("ready");
+}
+
+function newestRun(tree) {
+  const all = [];
+  const walk = (n) => {
+    all.push(n.run);
+    (n.children || []).forEach(walk);
+  };
+  (tree || []).forEach(walk);
+  all.sort((a, b) => (a.created < b.created ? -1 : a.created > b.created ? 1 : 0));
+  return all.find((r) => r.status === "running") || all[all.length - 1] || null;
+}
+
+// -- the top bar: volumes and live progress ------------------------------------------------------------
+function initTopbar() {
+  const select = document.getElementById("volume-select");
+  select.addEventListener("change", () => set({ volumeId: select.value }));
+  on(["volumes", "volumeId"], () => {
+    select.replaceChildren(
+      ...state.volumes.map((v) =>
+        el("option", { value: v.id, text: `${v.name || v.id} ${v.shape ? `(${v.shape.join("×")})` : ""}` }),
+      ),
+    );
+    if (state.volumeId) select.value = state.volumeId;
+  });
+  on("runDetail", () => {
+    // The volume picker follows the current run (a new run starts on what it shows).
+    const d = state.runDetail;
+    const id = d && (d.volume_id || (state.volumes.find((v) => v.id === d.info.volume || v.name === d.info.volume) || {}).id);
+    if (id && id !== state.volumeId && state.volumes.some((v) => v.id === id)) set({ volumeId: id });
+  });
+  const file = document.getElementById("volume-upload");
+  file.addEventListener("change", async () => {
+    const f = file.files[0];
+    if (!f) return;
+    showMessage(`Uploading ${f.name}…`, { kind: "info", timeout: 3000 });
+    try {
+      const v = await api.upload("/api/volumes", f, f.name);
+      set({ volumes: [...state.volumes.filter((x) => x.id !== v.id), v], volumeId: v.id });
+      showMessage(`Loaded ${v.name || v.id}.`, { kind: "ok" });
+    } catch (err) {
+      showError(err);
+    } finally {
+      file.value = "";
+    }
+  });
+  on(["runDetail", "progressTick", "live"], renderProgress);
+  renderProgress();
+}
+
+function renderProgress() {
+  const box = document.getElementById("progress");
+  const d = state.runDetail;
+  if (!d) {
+    box.replaceChildren(el("span.muted", { text: state.run ? `${state.run}: loading…` : "no run yet" }));
+    box.dataset.status = "";
+    return;
+  }
+  const p = d.progress || {};
+  const snap = d.snapshot || {};
+  const status = snap.status && snap.status !== "idle" && snap.status !== "ended" ? snap.status : d.info.status;
+  const done = p.matches_done || 0;
+  const total = p.matches_total || 0;
+  const frac = total ? Math.min(1, done / total) : 0;
+  const bar = el("span.bar", {}, el("span.bar-fill", { style: { width: `${Math.round(frac * 100)}%` } }));
+  const gens = p.generations || snap.generations || d.info.generations || 0;
+  const doneGens = Math.max(d.info.generations_done || 0, snap.generation || 0);
+  box.dataset.status = status;
+  const live = status === "running" || status === "paused" || status === "cancelling";
+  const parts = [
+    el("span.run-label", { text: d.info.name }),
+    el(`span.badge.status-${status}`, { text: status, "data-testid": "run-status" }),
+    p.stage || snap.stage ? el("span.kv", {}, el("span.k", { text: "stage" }), el("span.v", { text: p.stage || snap.stage })) : null,
+    el("span.kv", { title: "generations done / planned" }, el("span.k", { text: "generations" }), el("span.v", { text: `${doneGens}/${gens || "?"}` })),
+    live ? el("span.kv.matches", { title: "matches judged in this generation" }, el("span.k", { text: "matches" }), bar, el("span.v", { text: `${done}/${total || "?"}` })) : null,
+    el("span.kv", {}, el("span.k", { text: "calls" }), el("span.v", { text: String(p.calls ?? (d.info.cost || {}).calls ?? 0) })),
+    el("span.kv", {}, el("span.k", { text: "cost" }), el("span.v", { text: fmtUsd(p.usd ?? (d.info.cost || {}).usd ?? 0) })),
+    live ? el("span.kv", { title: "estimated time left" }, el("span.k", { text: "left" }), el("span.v", { text: fmtSeconds(p.seconds_left) })) : null,
+    state.live && state.live.run === d.info.name && !state.live.connected && status === "running"
+      ? el("span.badge.warn", { text: "reconnecting", title: "The event stream dropped; it reconnects by itself." })
+      : null,
+  ];
+  box.replaceChildren(...parts.filter(Boolean));
+}
+
+// -- export ------------------------------------------------------------------------------------------
+function initExport() {
+  const menu = document.getElementById("export-list");
+  const render = () => {
+    const qid = state.current;
+    document.getElementById("export-menu").classList.toggle("disabled", !qid);
+    menu.replaceChildren(
+      ...EXPORTS.map(([to, label]) =>
+        qid
+          ? el("a.menu-item", { href: api.exportUrl(qid, to), download: "", "data-to": to, text: label })
+          : el("span.menu-item.disabled", { text: label }),
+      ),
+    );
+  };
+  on("current", render);
+  render();
+}
+
+boot().catch(showError);

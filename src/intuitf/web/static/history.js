@@ -1,0 +1,212 @@
+// History view: the runs as a tree of stages and generations, one tab per root run.
+//
+// Each generation is a point with a thumbnail of its best; a run branched from a generation
+// (or from one of its candidates) hangs under that point, drawn as a branch. Clicking a point
+// makes its best current; "Explore from here" starts a branch from the current candidate.
+
+import * as api from "./api.js";
+import { findNode, refreshTree, rootOf, selectRun, setCurrent } from "./actions.js";
+import { showError, showMessage } from "./messages.js";
+import { el, fmtRating, fmtUsd, generationOf, on, splitQid, state } from "./state.js";
+
+let tabsEl;
+let treeEl;
+let branchBtn;
+let lastKey = "";
+
+export function initHistory() {
+  tabsEl = document.getElementById("history-tabs");
+  treeEl = document.getElementById("history-tree");
+  branchBtn = document.getElementById("branch-btn");
+  branchBtn.addEventListener("click", exploreFromHere);
+  on(["tree", "run", "current", "runDetail"], render);
+  render();
+}
+
+function activeRoot() {
+  return (state.run && rootOf(state.run)) || (state.tree && state.tree[state.tree.length - 1]) || null;
+}
+
+function render() {
+  const root = activeRoot();
+  const key = JSON.stringify([state.tree, state.run, state.current, root && root.run.name]);
+  branchBtn.disabled = !state.current;
+  const cur = splitQid(state.current);
+  branchBtn.title = cur ? `Start a new run from ${state.current}` : "Pick a point first";
+  if (key === lastKey) return;
+  lastKey = key;
+
+  // Tabs: one per root run (a run that is not a branch of another).
+  tabsEl.replaceChildren(
+    ...(state.tree || []).map((r) =>
+      el(
+        "button.tab",
+        {
+          type: "button",
+          role: "tab",
+          "aria-selected": root && r.run.name === root.run.name ? "true" : "false",
+          title: `${r.run.name} · ${r.run.volume} · ${r.run.status}`,
+          dataset: { run: r.run.name },
+          on: { click: () => selectRun(latestIn(r), { follow: false }) },
+        },
+        el(`span.dot.status-${r.run.status}`),
+        r.run.name,
+      ),
+    ),
+  );
+
+  const scroll = treeEl.scrollTop;
+  if (!root) {
+    treeEl.replaceChildren(
+      el("p.empty", { text: "No runs yet. Type what you want to see in the query panel and press Start." }),
+    );
+    return;
+  }
+  treeEl.replaceChildren(el("div.tree", {}, renderRun(root, 0)));
+  treeEl.scrollTop = scroll;
+  const here = treeEl.querySelector(".gen.current");
+  if (here && here.dataset.scrolled !== state.current) {
+    here.scrollIntoView({ block: "nearest" });
+    here.dataset.scrolled = state.current;
+  }
+}
+
+/** The run of a tree that is running, or else the one that was made last. */
+function latestIn(root) {
+  const all = [];
+  const walk = (n) => {
+    all.push(n.run);
+    n.children.forEach(walk);
+  };
+  walk(root);
+  const running = all.find((r) => r.status === "running");
+  if (running) return running.name;
+  all.sort((a, b) => (a.created < b.created ? -1 : a.created > b.created ? 1 : 0));
+  return all[all.length - 1].name;
+}
+
+function intentText(intent) {
+  if (!intent) return "";
+  if (intent.text) return intent.text;
+  return { image: "reference picture", sketch: "sketch", none: "explore", edit: "edit" }[intent.kind] || intent.kind || "";
+}
+
+function renderRun(node, depth) {
+  const info = node.run;
+  const cur = splitQid(state.current);
+  const isCurrentRun = state.run === info.name;
+  const gens = node.generations || [];
+  // Children hang under the generation they branched from.
+  const byGen = new Map();
+  const loose = [];
+  for (const child of node.children || []) {
+    const p = child.run.parent || {};
+    // From a candidate: under its generation; from "the start of generation g": under g-1.
+    const g = p.candidate
+      ? generationOf(p.candidate)
+      : Number.isInteger(p.generation)
+        ? Math.max(0, p.generation - 1)
+        : null;
+    if (g !== null && gens.some((x) => x.generation === g)) {
+      if (!byGen.has(g)) byGen.set(g, []);
+      byGen.get(g).push(child);
+    } else loose.push(child);
+  }
+
+  const head = el(
+    "div.run-head",
+    {
+      title: `${info.name}: ${intentText(info.intent)} · ${info.judge} · ${info.status}`,
+      on: { click: () => selectRun(info.name, { follow: info.status === "running" }) },
+    },
+    el(`span.dot.status-${info.status}`),
+    el("span.run-name", { text: info.name }),
+    el(`span.badge.status-${info.status}`, { text: info.status }),
+    el("span.run-intent", { text: intentText(info.intent) }),
+    el("span.run-meta", {
+      text: `${info.generations_done}/${info.generations || "?"} gen · ${fmtUsd((info.cost || {}).usd || 0)}`,
+    }),
+  );
+
+  const list = el("ol.gens");
+  let stage = null;
+  for (const g of gens) {
+    if (g.stage !== stage) {
+      stage = g.stage;
+      list.append(el(`li.stage-mark.stage-${stage}`, { text: stage }));
+    }
+    const isCurrent = isCurrentRun && cur && cur.run === info.name && generationOf(cur.cid) === g.generation;
+    const item = el(
+      `li.gen${isCurrent ? ".current" : ""}`,
+      { dataset: { qid: g.qid || "", generation: String(g.generation), run: info.name } },
+      el(
+        "button.gen-point",
+        {
+          type: "button",
+          title: `${g.qid} · ${g.stage} · rating ${fmtRating(g.rating)}`,
+          "aria-label": `generation ${g.generation} of ${info.name}`,
+          on: { click: () => g.qid && setCurrent(g.qid, { follow: false }) },
+        },
+        el("img.thumb", {
+          src: api.thumbnailUrl(info.name, g.generation, g.best),
+          alt: `best of generation ${g.generation}`,
+          loading: "lazy",
+          width: "44",
+          height: "44",
+        }),
+        el(
+          "span.gen-meta",
+          {},
+          el("span.gen-label", { text: `g${g.generation}` }),
+          el("span.gen-rating", { text: fmtRating(g.rating) }),
+          matchNote(g.match_stats),
+        ),
+      ),
+    );
+    const kids = byGen.get(g.generation);
+    if (kids) item.append(el("div.branches", {}, kids.map((k) => renderRun(k, depth + 1))));
+    list.append(item);
+  }
+  if (info.status === "running") {
+    list.append(
+      el("li.gen.pending", {}, el("span.spinner"), el("span.gen-label", { text: `g${gens.length} …` })),
+    );
+  }
+  if (!gens.length && info.status !== "running") {
+    list.append(el("li.gen.none", { text: info.message || "no generations yet" }));
+  }
+  return el(
+    `div.run-node${isCurrentRun ? ".current-run" : ""}${depth ? ".branch" : ""}`,
+    { dataset: { run: info.name } },
+    head,
+    list,
+    loose.length ? el("div.branches.loose", {}, loose.map((k) => renderRun(k, depth + 1))) : null,
+  );
+}
+
+function matchNote(stats) {
+  if (!stats || !stats.undecided) return null;
+  return el("span.gen-warn", { title: `${stats.undecided} matches undecided`, text: `${stats.undecided}?` });
+}
+
+/** Start a branch from the current candidate, with the query panel's text if any. */
+async function exploreFromHere() {
+  const cur = splitQid(state.current);
+  if (!cur) return;
+  const text = (document.getElementById("q-text") || {}).value || "";
+  const body = { candidate: cur.cid };
+  if (text.trim()) body.changes = { intent: { kind: "text", text: text.trim() } };
+  branchBtn.disabled = true;
+  try {
+    const res = await api.post(`/api/runs/${api.enc(cur.run)}/branch`, body);
+    await refreshTree();
+    await selectRun(res.name, { follow: true });
+    showMessage(`Branched ${res.name} from ${state.current || cur.cid}.`, { kind: "ok" });
+  } catch (err) {
+    showError(err);
+  } finally {
+    branchBtn.disabled = !state.current;
+  }
+}
+
+export { findNode };

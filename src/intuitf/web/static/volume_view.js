@@ -1,0 +1,376 @@
+// Volume interaction view: the current result rendered by the server, frame by frame, over the
+// WebSocket /api/view.
+//
+// Drag rotates (azimuth, elevation); shift-drag or right-drag pans; the wheel zooms. While
+// dragging the server sends small JPEG frames, on release one full PNG; only the newest
+// request is ever rendered (one frame in flight, the latest camera waiting). A click without a
+// drag picks the feature under the cursor (the smallest projected area among those visible
+// there): its outline is drawn at once and it is selected in the decomposition view.
+
+import * as api from "./api.js";
+import { showError, showMessage } from "./messages.js";
+import {
+  DEFAULT_CAMERA,
+  cameraJSON,
+  defaultTF,
+  hexToRgb,
+  on,
+  runVolumeId,
+  set,
+  splitQid,
+  state,
+} from "./state.js";
+
+const ACCENT = [255, 197, 66]; // the selection colour (amber)
+const MAX_SIZE = 512;
+
+let stage;
+let canvas;
+let ctx;
+let maskCanvas;
+let statsEl;
+let pickInfo;
+let titleEl;
+let socket;
+let viewSize = 256;
+let drag = null;
+let wheelTimer = null;
+let lastTargetKey = "";
+let frameCount = 0;
+
+export function initVolumeView() {
+  stage = document.getElementById("view-stage");
+  canvas = document.getElementById("view-canvas");
+  ctx = canvas.getContext("2d");
+  maskCanvas = document.getElementById("mask-canvas");
+  statsEl = document.getElementById("view-stats");
+  pickInfo = document.getElementById("pick-info");
+  titleEl = document.getElementById("view-title");
+
+  socket = new api.ViewSocket({
+    onFrame: showFrame,
+    onError: (e) => {
+      setBusy(false);
+      showMessage(e.error || "The view could not be rendered.", { kind: "error", hint: e.hint || "" });
+    },
+    onStatus: (s) => stage.classList.toggle("offline", s !== "open"),
+  });
+
+  // Controls beside the view.
+  const shade = document.getElementById("shade-toggle");
+  shade.checked = state.shaded;
+  shade.addEventListener("change", () => set({ shaded: shade.checked }));
+  const bg = document.getElementById("bg-color");
+  bg.value = state.background;
+  bg.addEventListener("input", () => set({ background: bg.value }));
+  document.getElementById("reset-camera").addEventListener("click", () => resetCamera());
+
+  // Pointer interaction.
+  canvas.addEventListener("pointerdown", onDown);
+  canvas.addEventListener("pointermove", onMove);
+  canvas.addEventListener("pointerup", onUp);
+  canvas.addEventListener("pointercancel", () => {
+    drag = null;
+  });
+  canvas.addEventListener("contextmenu", (e) => e.preventDefault());
+  canvas.addEventListener("wheel", onWheel, { passive: false });
+
+  new ResizeObserver(() => resize()).observe(stage);
+  resize();
+
+  on(["current", "candidate", "draft", "shaded", "background", "selected", "volumeId", "histogram"], () =>
+    frame(state.draftDragging ? "drag" : "full"),
+  );
+  on("camera", () => frame("full"));
+  on(["pick", "selected", "camera"], drawOverlay);
+  on(["current", "draft", "run", "volumeId", "histogram"], updateTitle);
+  on("runDetail", () => {
+    // A run's judging camera is where its pictures (and a sketch's base) come from.
+    const cam = state.runDetail && state.runDetail.camera;
+    if (cam && !state.cameraTouched && !sameCamera(normCamera(cam), state.camera)) set({ camera: normCamera(cam) });
+  });
+  updateTitle();
+  window.intuitfDebug = { state, get frames() { return frameCount; }, socket };
+}
+
+function normCamera(c) {
+  return {
+    azimuth: c.azimuth || 0,
+    elevation: c.elevation || 0,
+    zoom: c.zoom || 1,
+    pan: Array.isArray(c.pan) ? [c.pan[0] || 0, c.pan[1] || 0] : [0, 0],
+  };
+}
+
+function sameCamera(a, b) {
+  return JSON.stringify(cameraJSON(a)) === JSON.stringify(cameraJSON(b));
+}
+
+/** The judging camera of the current run (where the sketch is drawn), or the default. */
+export function judgingCamera() {
+  const cam = state.runDetail && state.runDetail.camera;
+  return cam ? normCamera(cam) : { ...DEFAULT_CAMERA, pan: [0, 0] };
+}
+
+export function resetCamera() {
+  state.cameraTouched = false;
+  set({ camera: judgingCamera() });
+}
+
+export function renderSize() {
+  return viewSize;
+}
+
+function resize() {
+  const r = stage.getBoundingClientRect();
+  const side = Math.max(64, Math.floor(Math.min(r.width, r.height)));
+  // The server renders at most MAX_SIZE; the picture is scaled to fill the view.
+  const size = Math.max(128, Math.min(MAX_SIZE, Math.round((side * Math.min(window.devicePixelRatio || 1, 1.5)) / 32) * 32));
+  for (const c of [canvas, maskCanvas, document.getElementById("sketch-canvas")]) {
+    c.style.setProperty("width", `${side}px`);
+    c.style.setProperty("height", `${side}px`);
+  }
+  if (size !== viewSize || canvas.width !== size) {
+    viewSize = size;
+    canvas.width = size;
+    canvas.height = size;
+    set({ viewSize: size });
+    frame("full");
+  }
+}
+
+function target() {
+  if (state.draft) {
+    const vol = runVolumeId();
+    return vol ? { volume: vol, tf: state.draft } : null;
+  }
+  if (state.current) return { candidate: state.current };
+  // No run yet: the chosen volume with a TF on its histogram's materials, to look at first.
+  if (state.volumeId && state.histogram && state.histogram.volume === state.volumeId) {
+    return { volume: state.volumeId, tf: defaultTF(state.histogram.materials) };
+  }
+  return null;
+}
+
+/** Ask for a frame of the current target from the current camera ("drag" or "full"). */
+export function frame(quality = "full") {
+  if (!socket) return;
+  const t = target();
+  if (!t) {
+    ctx.clearRect(0, 0, canvas.width, canvas.height);
+    stage.classList.add("empty");
+    return;
+  }
+  stage.classList.remove("empty");
+  const msg = {
+    target: t,
+    camera: cameraJSON(),
+    size: viewSize,
+    shaded: state.shaded,
+    background: hexToRgb(state.background),
+    quality,
+  };
+  if (state.selected.size) msg.highlight = [...state.selected].sort((a, b) => a - b);
+  lastTargetKey = JSON.stringify(t).slice(0, 200);
+  setBusy(true);
+  socket.request(msg);
+}
+
+function setBusy(b) {
+  stage.classList.toggle("busy", b);
+}
+
+async function showFrame(header, blob) {
+  if (!socket.busy) setBusy(false);
+  let bitmap;
+  try {
+    bitmap = await createImageBitmap(blob);
+  } catch (err) {
+    return; // a frame that does not decode is skipped; the next one replaces it
+  }
+  ctx.imageSmoothingEnabled = true;
+  ctx.imageSmoothingQuality = "high";
+  ctx.drawImage(bitmap, 0, 0, canvas.width, canvas.height);
+  bitmap.close && bitmap.close();
+  frameCount += 1;
+  canvas.dataset.quality = header.quality || "";
+  canvas.dataset.frames = String(frameCount);
+  canvas.dataset.req = String(header.req || "");
+  statsEl.textContent = `${header.width || "?"}×${header.height || "?"} ${header.quality || ""} · ${header.ms !== undefined ? Math.round(header.ms) : "?"} ms`;
+  if (header.quality === "full" && !socket.busy) {
+    set({ viewSettled: { camera: cameraJSON(), size: viewSize, shaded: state.shaded, key: lastTargetKey, n: frameCount } });
+  }
+}
+
+function updateTitle() {
+  const cur = splitQid(state.current);
+  titleEl.textContent = state.draft
+    ? `Editing ${state.current || "a new TF"} by hand`
+    : cur
+      ? `${cur.run} / ${cur.cid}`
+      : state.volumeId
+        ? `${state.volumeId} · preview on its histogram's materials`
+        : "nothing to show yet";
+}
+
+// -- pointer interaction ------------------------------------------------------------------------
+function onDown(e) {
+  if (state.sketching) return;
+  if (e.button !== 0 && e.button !== 2) return;
+  canvas.setPointerCapture(e.pointerId);
+  drag = {
+    x: e.clientX,
+    y: e.clientY,
+    cam: { ...state.camera, pan: [...state.camera.pan] },
+    pan: e.button === 2 || e.shiftKey,
+    moved: false,
+    mods: { add: e.ctrlKey || e.metaKey || e.altKey },
+  };
+}
+
+function onMove(e) {
+  if (!drag) return;
+  const dx = e.clientX - drag.x;
+  const dy = e.clientY - drag.y;
+  if (!drag.moved && Math.hypot(dx, dy) < 4) return;
+  drag.moved = true;
+  stage.classList.add("dragging");
+  const r = canvas.getBoundingClientRect();
+  const c = drag.cam;
+  if (drag.pan) {
+    state.camera = { ...c, pan: [c.pan[0] + dx / r.width, c.pan[1] - dy / r.height] };
+  } else {
+    state.camera = {
+      ...c,
+      azimuth: (((c.azimuth - (dx * 180) / r.width) % 360) + 360) % 360,
+      elevation: Math.max(-89, Math.min(89, c.elevation + (dy * 180) / r.height)),
+    };
+  }
+  state.cameraTouched = true;
+  drawOverlay();
+  frame("drag");
+}
+
+function onUp(e) {
+  if (!drag) return;
+  const d = drag;
+  drag = null;
+  stage.classList.remove("dragging");
+  if (d.moved) {
+    set({ camera: state.camera }); // the full frame, the features and the overlay follow
+    return;
+  }
+  if (e.button === 0 || e.button === 2) pickAt(e, d.mods.add);
+}
+
+function onWheel(e) {
+  if (state.sketching) return;
+  e.preventDefault();
+  const c = state.camera;
+  const zoom = Math.max(0.25, Math.min(8, c.zoom * Math.exp(-e.deltaY * 0.0015)));
+  state.camera = { ...c, zoom };
+  state.cameraTouched = true;
+  drawOverlay();
+  frame("drag");
+  clearTimeout(wheelTimer);
+  wheelTimer = setTimeout(() => set({ camera: state.camera }), 220);
+}
+
+// -- picking ---------------------------------------------------------------------------------------
+async function pickAt(e, add) {
+  const r = canvas.getBoundingClientRect();
+  const x = Math.min(viewSize - 1, Math.max(0, Math.floor(((e.clientX - r.left) / r.width) * viewSize)));
+  const y = Math.min(viewSize - 1, Math.max(0, Math.floor(((e.clientY - r.top) / r.height) * viewSize)));
+  const cur = splitQid(state.current);
+  if (!cur || state.draft) {
+    if (state.draft) showMessage("Keep or discard the hand edit before selecting features.", { kind: "info" });
+    return;
+  }
+  const camera = cameraJSON();
+  try {
+    const res = await api.post(`/api/candidates/${api.enc(cur.run)}/${api.enc(cur.cid)}/pick`, {
+      camera,
+      x,
+      y,
+      size: viewSize,
+      shaded: state.shaded,
+    });
+    if (state.current !== `${cur.run}/${cur.cid}`) return;
+    state.follow = false;
+    let selected;
+    if (res.index === null || res.index === undefined) {
+      selected = add ? new Set(state.selected) : new Set();
+      pickInfo.textContent = "Nothing visible here: selection cleared.";
+    } else {
+      selected = new Set(add ? state.selected : []);
+      if (add && state.selected.has(res.index)) selected.delete(res.index);
+      else selected.add(res.index);
+      const n = (res.visible || []).length;
+      pickInfo.textContent = `Selected feature ${res.index + 1}${n > 1 ? ` (the smallest of ${n} visible here)` : ""}.`;
+    }
+    set({ pick: { ...res, camera, size: viewSize, x, y }, selected });
+  } catch (err) {
+    showError(err);
+  }
+}
+
+// -- the selection overlay ---------------------------------------------------------------------------
+let maskCache = { uri: null, data: null };
+
+async function maskPixels(uri, size) {
+  if (maskCache.uri === uri && maskCache.data && maskCache.data.width === size) return maskCache.data;
+  const img = new Image();
+  img.src = uri;
+  await img.decode();
+  const off = document.createElement("canvas");
+  off.width = size;
+  off.height = size;
+  const octx = off.getContext("2d");
+  octx.drawImage(img, 0, 0, size, size);
+  const data = octx.getImageData(0, 0, size, size);
+  maskCache = { uri, data };
+  return data;
+}
+
+async function drawOverlay() {
+  const p = state.pick;
+  const mctx = maskCanvas.getContext("2d");
+  const show = p && p.mask && p.index !== null && state.selected.has(p.index) && sameCamera(p.camera, state.camera) && !state.draft;
+  if (!show) {
+    mctx.clearRect(0, 0, maskCanvas.width, maskCanvas.height);
+    maskCanvas.dataset.index = "";
+    return;
+  }
+  const size = p.size;
+  let src;
+  try {
+    src = await maskPixels(p.mask, size);
+  } catch (_) {
+    return;
+  }
+  if (state.pick !== p) return;
+  maskCanvas.width = size;
+  maskCanvas.height = size;
+  const out = mctx.createImageData(size, size);
+  const a = src.data;
+  const inside = (i) => a[i * 4 + 3] > 96;
+  let count = 0;
+  for (let y = 0; y < size; y++) {
+    for (let x = 0; x < size; x++) {
+      const i = y * size + x;
+      if (!inside(i)) continue;
+      count += 1;
+      const edge =
+        x === 0 || y === 0 || x === size - 1 || y === size - 1 || !inside(i - 1) || !inside(i + 1) || !inside(i - size) || !inside(i + size);
+      const o = i * 4;
+      out.data[o] = ACCENT[0];
+      out.data[o + 1] = ACCENT[1];
+      out.data[o + 2] = ACCENT[2];
+      out.data[o + 3] = edge ? 255 : 70;
+    }
+  }
+  mctx.putImageData(out, 0, 0);
+  maskCanvas.dataset.index = String(p.index);
+  maskCanvas.dataset.pixels = String(count);
+}
+
