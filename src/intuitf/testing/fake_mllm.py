@@ -308,7 +308,7 @@ class FakeMLLMServer:
         delay = self.latency.sample(rng)
         u_bias, u_noise = rng.random(), rng.random()
         if fault == "hang":
-            await asyncio.sleep(self.hang_seconds)
+            await self._hang()
         if delay > 0:
             await asyncio.sleep(delay)
         if fault in ("rate_limit", "overloaded"):
@@ -378,6 +378,15 @@ class FakeMLLMServer:
             },
             {},
         )
+
+    async def _hang(self) -> None:
+        """Wait ``hang_seconds``, or until the server stops (so stopping it stays quiet)."""
+        end = time.monotonic() + self.hang_seconds
+        while time.monotonic() < end:
+            server = self._server
+            if server is None or server.should_exit:
+                return
+            await asyncio.sleep(min(0.05, max(0.0, end - time.monotonic())))
 
     def _decide(self, first: np.ndarray, second: np.ndarray, u_bias: float, u_noise: float) -> str:
         choice = oracle_choice(
