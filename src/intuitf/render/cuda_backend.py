@@ -250,26 +250,40 @@ class CudaSampleCache(CacheViews):
         return int(sum(a.size * a.dtype.itemsize for a in arrays))
 
     # -- rendering ------------------------------------------------------------------------
-    def _composite(self, tfs: Sequence[GaussianTF], to8: bool) -> np.ndarray:
+    def upload(self, tfs: Sequence[GaussianTF], to8: bool = True) -> list[tuple]:
+        """The TFs' LUTs and occupancy on the GPU, in launch-sized parts: (K, luts, occ)."""
         be = self.backend
-        r = self.renderer
         luts = be.luts(tfs)
-        if not r.shading:
+        if not self.renderer.shading:
             luts[:, :, :3] *= luts[:, :, 3:4]  # premultiplied, as composite_unshaded
         parts = []
         for part in be._chunks(luts.shape[0], to8):
             lut = np.ascontiguousarray(luts[part])
             occ = _occupancy(lut[:, :, 3])
-            k = lut.shape[0]
-            out_rgba, out_rgb = be._outputs(k, to8)
-            ck.composite[k * be.n_blocks, ck.BLOCK](
-                self.counts, self.tile_base, self.samples, self.diffuse, self.specular,
-                self.segmin, self.segmax, cuda.to_device(occ), cuda.to_device(lut), r.shading,
-                be.shade, be.t_stop, be.tiles_x, r.width, r.height, be.bg, to8, out_rgba,
-                out_rgb,
-            )  # fmt: skip
-            parts.append(be._pictures(out_rgba, out_rgb, to8))
-        return parts[0] if len(parts) == 1 else np.concatenate(parts)
+            parts.append((lut.shape[0], cuda.to_device(lut), cuda.to_device(occ)))
+        return parts
+
+    def launch(self, k: int, luts, occ, to8: bool = True) -> tuple:
+        """Composite K uploaded LUTs in one launch; returns the (RGBA, RGB) device outputs.
+
+        Asynchronous: the benchmark times it with CUDA events; :meth:`render_many` uses it.
+        """
+        be = self.backend
+        r = self.renderer
+        out_rgba, out_rgb = be._outputs(k, to8)
+        ck.composite[k * be.n_blocks, ck.BLOCK](
+            self.counts, self.tile_base, self.samples, self.diffuse, self.specular, self.segmin,
+            self.segmax, occ, luts, r.shading, be.shade, be.t_stop, be.tiles_x, r.width,
+            r.height, be.bg, to8, out_rgba, out_rgb,
+        )  # fmt: skip
+        return out_rgba, out_rgb
+
+    def _composite(self, tfs: Sequence[GaussianTF], to8: bool) -> np.ndarray:
+        pictures = [
+            self.backend._pictures(*self.launch(k, luts, occ, to8), to8)
+            for k, luts, occ in self.upload(tfs, to8)
+        ]
+        return pictures[0] if len(pictures) == 1 else np.concatenate(pictures)
 
     def render_rgba(self, tf: GaussianTF) -> np.ndarray:
         """Premultiplied RGBA float32 (H, W, 4) of ``tf``."""
