@@ -262,13 +262,6 @@ def test_progress_reports_every_match():
     assert max(d for _, _, d, _ in seen) == len(res.matches)
 
 
-def test_fitness_uses_rank_schedule():
-    res = run(SwissTournament(OracleJudge(), ASPECTS, seed=0), shuffled(8))
-    fit = res.fitness(progress=0.0)
-    assert fit[res.ranking[0]] == pytest.approx(8**1.2)
-    assert fit[res.ranking[-1]] == pytest.approx(1.0)
-
-
 def test_rounds_run_concurrently():
     judge = OracleJudge()
     n = 20

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from conftest import rank_by_target
 
-from intuitf.explorer import Bounds, Candidate, Explorer
+from intuitf.explorer import Bounds, Candidate, GeneticExplorer
 from intuitf.explorer.genome import near_duplicate
 from intuitf.tf import Gaussian, GaussianTF
 
@@ -18,13 +18,13 @@ def _ids(cands):
     return [c.id for c in cands]
 
 
-def _run(ex: Explorer, target_lut, generations: int) -> None:
+def _run(ex: GeneticExplorer, target_lut, generations: int) -> None:
     for _ in range(generations):
         ex.tell(rank_by_target(ex.ask(), target_lut))
 
 
 def test_ask_is_stable_until_tell():
-    ex = Explorer(population=12, n_gaussians=4, seed=3)
+    ex = GeneticExplorer(population=12, n_gaussians=4, seed=3)
     a, b = ex.ask(), ex.ask()
     assert _ids(a) == _ids(b) and [c.tf for c in a] == [c.tf for c in b]
     assert len(set(_ids(a))) == 12
@@ -34,7 +34,7 @@ def test_ask_is_stable_until_tell():
 
 
 def test_population_size_constant_and_ids_unique(target_tf):
-    ex = Explorer(population=13, n_gaussians=5, generations=10, seed=7)
+    ex = GeneticExplorer(population=13, n_gaussians=5, generations=10, seed=7)
     seen: dict[str, GaussianTF] = {}
     for _ in range(10):
         cands = ex.ask()
@@ -47,7 +47,7 @@ def test_population_size_constant_and_ids_unique(target_tf):
 
 
 def test_elites_pass_unchanged_with_same_ids(target_tf):
-    ex = Explorer(population=20, n_gaussians=4, generations=10, seed=2)
+    ex = GeneticExplorer(population=20, n_gaussians=4, generations=10, seed=2)
     lut = target_tf.lut(64)
     for g in range(10):
         cands = ex.ask()
@@ -66,7 +66,7 @@ def test_elites_pass_unchanged_with_same_ids(target_tf):
 
 def test_bounds_respected_and_no_near_duplicates(target_tf):
     bounds = Bounds(width=(0.01, 0.05), lightness=(0.4, 0.8), saturation=(0.2, 0.9))
-    ex = Explorer(population=16, n_gaussians=5, generations=8, seed=11, bounds=bounds)
+    ex = GeneticExplorer(population=16, n_gaussians=5, generations=8, seed=11, bounds=bounds)
     lut = target_tf.lut(64)
     for _ in range(8):
         cands = ex.ask()
@@ -82,7 +82,7 @@ def test_dedup_replaces_duplicates_of_initial():
     tf = GaussianTF((Gaussian(0.3, 0.02, 0.1, (1, 0, 0)), Gaussian(0.6, 0.03, 0.3, (0, 0, 1))))
     # The same TF given four times, into a population of ten in the refine stage where only
     # Gaussian 1 may vary: the copies must become distinct variants.
-    ex = Explorer(population=10, n_gaussians=2, seed=0, initial=[tf, tf, tf, tf])
+    ex = GeneticExplorer(population=10, n_gaussians=2, seed=0, initial=[tf, tf, tf, tf])
     cands = ex.ask()
     assert cands[0].tf == tf and cands[0].origin == "initial"
     assert sum(c.tf == tf for c in cands) == 1
@@ -93,12 +93,12 @@ def test_dedup_replaces_duplicates_of_initial():
 
 def test_same_seed_same_rankings_same_candidates(target_tf):
     lut = target_tf.lut(64)
-    a = Explorer(population=14, n_gaussians=4, generations=6, seed=5)
-    b = Explorer(population=14, n_gaussians=4, generations=6, seed=5)
+    a = GeneticExplorer(population=14, n_gaussians=4, generations=6, seed=5)
+    b = GeneticExplorer(population=14, n_gaussians=4, generations=6, seed=5)
     _run(a, lut, 6)
     _run(b, lut, 6)
     assert [c.to_dict() for c in a.ask()] == [c.to_dict() for c in b.ask()]
-    c = Explorer(population=14, n_gaussians=4, generations=6, seed=6)
+    c = GeneticExplorer(population=14, n_gaussians=4, generations=6, seed=6)
     _run(c, lut, 6)
     assert [x.tf for x in c.ask()] != [x.tf for x in a.ask()]
 
@@ -106,10 +106,10 @@ def test_same_seed_same_rankings_same_candidates(target_tf):
 def test_state_dict_json_round_trip_continues_bit_for_bit(target_tf):
     lut = target_tf.lut(64)
     hist = np.exp(-0.5 * ((np.linspace(0, 1, 256) - 0.5) / 0.03) ** 2) * 1e4 + 10
-    a = Explorer(population=12, n_gaussians=4, generations=8, seed=9, histogram=hist)
+    a = GeneticExplorer(population=12, n_gaussians=4, generations=8, seed=9, histogram=hist)
     _run(a, lut, 3)
     state = json.loads(json.dumps(a.state_dict()))
-    b = Explorer.from_state(state)
+    b = GeneticExplorer.from_state(state)
     assert [x.to_dict() for x in b.ask()] == [x.to_dict() for x in a.ask()]
     assert b.generation == a.generation and b.progress == a.progress and b.history == a.history
     _run(a, lut, 4)
@@ -117,14 +117,14 @@ def test_state_dict_json_round_trip_continues_bit_for_bit(target_tf):
     assert [x.to_dict() for x in b.ask()] == [x.to_dict() for x in a.ask()]
     # Checkpoints through a stage change too.
     a.set_stage("refine", selected=[1])
-    b = Explorer.from_state(json.loads(json.dumps(a.state_dict())))
+    b = GeneticExplorer.from_state(json.loads(json.dumps(a.state_dict())))
     _run(a, lut, 2)
     _run(b, lut, 2)
     assert [x.to_dict() for x in b.ask()] == [x.to_dict() for x in a.ask()]
 
 
 def test_tell_rejects_incomplete_or_unknown_ranking():
-    ex = Explorer(population=6, n_gaussians=2, seed=0)
+    ex = GeneticExplorer(population=6, n_gaussians=2, seed=0)
     ids = _ids(ex.ask())
     with pytest.raises(ValueError):
         ex.tell(ids[:-1])
@@ -137,7 +137,7 @@ def test_tell_rejects_incomplete_or_unknown_ranking():
 
 def test_initial_tfs_included_as_is():
     tf = GaussianTF((Gaussian(0.4, 0.2, 0.9, (0.1, 0.2, 0.3)),), name="earlier")
-    ex = Explorer(population=8, n_gaussians=1, seed=0, initial=[tf])
+    ex = GeneticExplorer(population=8, n_gaussians=1, seed=0, initial=[tf])
     first = ex.ask()[0]
     assert first.tf == tf and first.origin == "initial"
     # The run's bounds widen to hold the given TF (width 0.2 exceeds the default 0.08).
@@ -147,7 +147,7 @@ def test_initial_tfs_included_as_is():
 
 def test_refine_freezes_all_but_selected_in_every_individual(target_tf):
     lut = target_tf.lut(64)
-    ex = Explorer(population=12, n_gaussians=4, generations=5, seed=4)
+    ex = GeneticExplorer(population=12, n_gaussians=4, generations=5, seed=4)
     _run(ex, lut, 3)
     ex.set_stage("refine", generations=5, selected=[2])
     assert ex.progress == 0.0 and ex.aspects == "edit"
@@ -172,7 +172,7 @@ def test_refine_from_base_varies_only_selected():
             Gaussian(0.8, 0.02, 0.6, (0.9, 0.9, 0.9)),
         )
     )
-    ex = Explorer(population=10, n_gaussians=3, seed=1)
+    ex = GeneticExplorer(population=10, n_gaussians=3, seed=1)
     ex.set_stage("refine", selected=[1], base=base)
     cands = ex.ask()
     assert len(cands) == 10 and cands[0].tf.unfreeze() == base
@@ -184,7 +184,7 @@ def test_refine_from_base_varies_only_selected():
 
 def test_customize_keeps_structure_and_colours(target_tf):
     lut = target_tf.lut(64)
-    ex = Explorer(population=12, n_gaussians=4, generations=4, seed=8)
+    ex = GeneticExplorer(population=12, n_gaussians=4, generations=4, seed=8)
     _run(ex, lut, 4)
     before = ex.ask()
     ex.set_stage("customize", generations=6)
@@ -194,14 +194,14 @@ def test_customize_keeps_structure_and_colours(target_tf):
 
 
 def test_candidate_round_trip():
-    ex = Explorer(population=4, n_gaussians=2, seed=0)
+    ex = GeneticExplorer(population=4, n_gaussians=2, seed=0)
     c = ex.ask()[0]
     d = json.loads(json.dumps(c.to_dict()))
     assert Candidate.from_dict(d) == c
 
 
 def test_bad_set_stage_changes_nothing():
-    ex = Explorer(population=6, n_gaussians=3, generations=4, seed=0)
+    ex = GeneticExplorer(population=6, n_gaussians=3, generations=4, seed=0)
     ex.tell([c.id for c in ex.ask()])
     before = json.dumps(ex.state_dict())
     with pytest.raises(ValueError):
@@ -214,7 +214,7 @@ def test_bad_set_stage_changes_nothing():
 
 
 def test_local_steps_come_from_the_top_of_the_ranking(target_tf):
-    ex = Explorer(population=20, n_gaussians=4, generations=6, seed=4)
+    ex = GeneticExplorer(population=20, n_gaussians=4, generations=6, seed=4)
     lut = target_tf.lut(64)
     for _ in range(3):
         cands = ex.ask()
@@ -236,12 +236,12 @@ def _near_palette(tfs, palette, tol=0.25) -> float:
 
 def test_palette_colours_new_gaussians_and_survives_the_state():
     palette = [(0.95, 0.55, 0.15), (0.35, 0.6, 0.95)]
-    with_palette = Explorer(population=40, n_gaussians=5, seed=1, palette=palette)
-    without = Explorer(population=40, n_gaussians=5, seed=1)
+    with_palette = GeneticExplorer(population=40, n_gaussians=5, seed=1, palette=palette)
+    without = GeneticExplorer(population=40, n_gaussians=5, seed=1)
     share = with_palette.stage.palette_share
     assert _near_palette([c.tf for c in with_palette.ask()], palette) > share - 0.1
     assert _near_palette([c.tf for c in without.ask()], palette) < 0.25
     state = json.loads(json.dumps(with_palette.state_dict()))
-    assert Explorer.from_state(state).palette == tuple(tuple(c) for c in palette)
+    assert GeneticExplorer.from_state(state).palette == tuple(tuple(c) for c in palette)
     with pytest.raises(ValueError, match="palette colour"):
-        Explorer(population=4, palette=[(1.0, 2.0, 0.0)])
+        GeneticExplorer(population=4, palette=[(1.0, 2.0, 0.0)])

@@ -12,7 +12,7 @@ from intuitf.explorer import (
     METHODS,
     Bounds,
     CMAExplorer,
-    Explorer,
+    GeneticExplorer,
     RandomSearchExplorer,
     explorer_from_state,
     make_explorer,
@@ -30,7 +30,7 @@ def _histogram() -> np.ndarray:
 
 
 def test_histogram_seeds_land_on_the_peaks():
-    ex = Explorer(population=30, n_gaussians=5, seed=3, histogram=_histogram())
+    ex = GeneticExplorer(population=30, n_gaussians=5, seed=3, histogram=_histogram())
     seeds = [c for c in ex.ask() if c.origin == "seed"]
     assert len(seeds) == 20  # two thirds of the population
     for c in seeds:
@@ -49,7 +49,7 @@ def test_histogram_seeds_land_on_the_peaks():
 
 
 def test_no_histogram_means_no_seeds_and_paper_ga_has_none():
-    assert all(c.origin == "random" for c in Explorer(population=8, seed=0).ask())
+    assert all(c.origin == "random" for c in GeneticExplorer(population=8, seed=0).ask())
     ex = make_explorer("paper-ga", population=8, seed=0, histogram=_histogram())
     assert all(c.origin == "random" for c in ex.ask())
     assert ex.stage.name == "paper-initialize" and not ex.stage.dedup

@@ -7,13 +7,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from intuitf.evaluator.fitness import rank_fitness
 from intuitf.explorer import (
     CUSTOMIZE,
     INITIALIZE,
     Bounds,
     Decay,
-    Explorer,
+    GeneticExplorer,
     StagePreset,
     crossover,
     decode,
@@ -26,6 +25,7 @@ from intuitf.explorer import (
     rgb_to_hsl,
     roulette,
 )
+from intuitf.explorer.fitness import rank_fitness
 from intuitf.tf import Gaussian, GaussianTF
 
 B = Bounds()
@@ -167,7 +167,7 @@ def test_rates_and_steps_decay_over_the_stage_and_restart():
 
 
 def test_explorer_rates_follow_progress():
-    ex = Explorer(population=6, n_gaussians=2, generations=5, seed=0)
+    ex = GeneticExplorer(population=6, n_gaussians=2, generations=5, seed=0)
     seen = []
     for _ in range(6):
         seen.append(ex.progress)
@@ -191,7 +191,7 @@ def test_roulette_favours_top_ranks_more_as_pressure_rises():
 
 
 def test_explorer_parents_come_mostly_from_top_ranks():
-    ex = Explorer(population=40, n_gaussians=3, generations=10, seed=1)
+    ex = GeneticExplorer(population=40, n_gaussians=3, generations=10, seed=1)
     cands = ex.ask()
     ranking = [c.id for c in cands]
     ex.tell(ranking)
@@ -296,3 +296,12 @@ def test_recolour_mutation_draws_from_the_palette():
     # Without a palette the same rate does nothing special: grey stays near grey.
     no_palette = replace(always, palette=(), color_rate=0.0)
     assert mutate(tf, rng, no_palette, B).gaussians[0].color == (0.5, 0.5, 0.5)
+
+
+def test_rank_fitness_follows_the_pressure_schedule():
+    from intuitf.explorer.fitness import PressureSchedule, rank_fitness
+
+    fit = rank_fitness(8, progress=0.0)
+    assert fit[0] == pytest.approx(8**1.2) and fit[-1] == pytest.approx(1.0)
+    late = rank_fitness(8, progress=1.0, schedule=PressureSchedule(1.2, 4.0))
+    assert late[0] == pytest.approx(8**4.0) and list(late) == sorted(late, reverse=True)

@@ -57,7 +57,6 @@ from typing import Literal
 import numpy as np
 
 from intuitf.errors import IntuitfError
-from intuitf.evaluator.fitness import PressureSchedule, rank_fitness
 from intuitf.evaluator.types import Aspect, Choice, Cost, Intent, Judge, Verdict
 
 Protocol = Literal["efficient", "paper"]
@@ -205,13 +204,6 @@ class TournamentResult:
     def match_stats(self) -> MatchStats:
         """Decided, undecided and re-asked matches of this tournament."""
         return MatchStats.of(self.matches)
-
-    def fitness(
-        self, progress: float, schedule: PressureSchedule | None = None
-    ) -> dict[str, float]:
-        """Selection fitness per id from the ranking, via :func:`rank_fitness`."""
-        fit = rank_fitness(len(self.ranking), progress, schedule)
-        return {pid: float(f) for pid, f in zip(self.ranking, fit, strict=True)}
 
     def to_dict(self) -> dict:
         """A JSON-able form (verdicts via ``Verdict.to_dict``)."""

@@ -1,6 +1,6 @@
 """The Explorer: evolves Gaussian-mixture transfer functions in ask/tell style.
 
-``ask()`` returns the candidates to render; ``tell(ranking)`` takes their ids best first
+``Explorer`` is the concept (ask, tell, done, best, state_dict); ``ask()`` returns the candidates to render; ``tell(ranking)`` takes their ids best first
 and builds the next population. :func:`make_explorer` picks the method: the genetic
 algorithm (``"ga"``), the authors' GA settings (``"paper-ga"``), CMA-ES (``"cmaes"``) or
 random search (``"random"``).
@@ -16,10 +16,11 @@ if TYPE_CHECKING:  # the names below, for type checkers and editors
     from intuitf.explorer.candidate import Candidate
     from intuitf.explorer.cmaes import CMAExplorer
     from intuitf.explorer.factory import METHODS, explorer_from_state, make_explorer
-    from intuitf.explorer.ga import Explorer
+    from intuitf.explorer.ga import GeneticExplorer
     from intuitf.explorer.genome import decode, encode, near_duplicate
     from intuitf.explorer.operators import MutationParams, crossover, elite_count, mutate, roulette
     from intuitf.explorer.population import random_tf, seeded_tf
+    from intuitf.explorer.protocol import Explorer
     from intuitf.explorer.random_search import RandomSearchExplorer
     from intuitf.explorer.stages import (
         CUSTOMIZE,
@@ -41,7 +42,10 @@ _EXPORTS = {
     "METHODS": "intuitf.explorer.factory",
     "explorer_from_state": "intuitf.explorer.factory",
     "make_explorer": "intuitf.explorer.factory",
-    "Explorer": "intuitf.explorer.ga",
+    "Explorer": "intuitf.explorer.protocol",
+    "GeneticExplorer": "intuitf.explorer.ga",
+    "PressureSchedule": "intuitf.explorer.fitness",
+    "rank_fitness": "intuitf.explorer.fitness",
     "decode": "intuitf.explorer.genome",
     "encode": "intuitf.explorer.genome",
     "near_duplicate": "intuitf.explorer.genome",
@@ -72,6 +76,8 @@ __all__ = [
     "Candidate",
     "Decay",
     "Explorer",
+    "GeneticExplorer",
+    "PressureSchedule",
     "INITIALIZE",
     "METHODS",
     "MutationParams",
@@ -90,6 +96,7 @@ __all__ = [
     "near_duplicate",
     "paper_settings",
     "random_tf",
+    "rank_fitness",
     "rgb_to_hsl",
     "roulette",
     "seeded_tf",

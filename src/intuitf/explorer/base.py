@@ -8,9 +8,9 @@ from typing import Any
 
 import numpy as np
 
-from intuitf.evaluator.fitness import rank_fitness
 from intuitf.explorer.bounds import Bounds
 from intuitf.explorer.candidate import Candidate, candidate_id
+from intuitf.explorer.fitness import rank_fitness
 from intuitf.explorer.genome import is_duplicate_of_any
 from intuitf.explorer.hints import Hint, as_hints, hinted_tf
 from intuitf.explorer.operators import MutationParams, mutate
@@ -157,6 +157,11 @@ class BaseExplorer:
     def history(self) -> list[str]:
         """Id of the best candidate of each told generation, in order."""
         return list(self._history)
+
+    @property
+    def done(self) -> bool:
+        """Whether the current stage has run its planned generations (the Explorer protocol)."""
+        return self.finished
 
     @property
     def finished(self) -> bool:

@@ -7,24 +7,24 @@ from typing import Any
 
 from intuitf.explorer.base import BaseExplorer
 from intuitf.explorer.cmaes import CMAExplorer
-from intuitf.explorer.ga import Explorer
+from intuitf.explorer.ga import GeneticExplorer
 from intuitf.explorer.methods import METHODS  # re-exported
 from intuitf.explorer.random_search import RandomSearchExplorer
 from intuitf.explorer.stages import paper_settings
 
 
 def make_explorer(method: str = "ga", **kwargs: Any) -> BaseExplorer:
-    """An explorer for ``method`` with the keyword arguments of :class:`Explorer`.
+    """An explorer for ``method`` with the keyword arguments of :class:`GeneticExplorer`.
 
     ``"ga"``: this project's GA; ``"paper-ga"``: the same GA with the authors' settings
     (:func:`paper_settings`); ``"cmaes"``: :class:`CMAExplorer` (also takes ``sigma0``,
     ``stage_sigma``); ``"random"``: :class:`RandomSearchExplorer`.
     """
     if method == "ga":
-        return Explorer(**kwargs)
+        return GeneticExplorer(**kwargs)
     if method == "paper-ga":
         kwargs.setdefault("presets", paper_settings())
-        return Explorer(**kwargs)
+        return GeneticExplorer(**kwargs)
     if method == "cmaes":
         return CMAExplorer(**kwargs)
     if method == "random":
@@ -34,7 +34,7 @@ def make_explorer(method: str = "ga", **kwargs: Any) -> BaseExplorer:
 
 def explorer_from_state(state: Mapping[str, Any]) -> BaseExplorer:
     """The explorer a :meth:`~BaseExplorer.state_dict` came from, continuing where it was."""
-    classes = {c.method: c for c in (Explorer, CMAExplorer, RandomSearchExplorer)}
+    classes = {c.method: c for c in (GeneticExplorer, CMAExplorer, RandomSearchExplorer)}
     method = state.get("method")
     if method not in classes:
         raise ValueError(f"Unknown explorer method {method!r} in saved state.")

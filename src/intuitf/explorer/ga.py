@@ -15,10 +15,10 @@ def _canonical(tf: GaussianTF) -> GaussianTF:
     return tf if tf.frozen_mask().any() else tf.sorted()
 
 
-class Explorer(BaseExplorer):
+class GeneticExplorer(BaseExplorer):
     """Genetic algorithm over Gaussian-mixture TFs, in ask/tell style.
 
-    >>> ex = Explorer(population=8, n_gaussians=3, generations=5, seed=1)
+    >>> ex = GeneticExplorer(population=8, n_gaussians=3, generations=5, seed=1)
     >>> cands = ex.ask()                       # render these
     >>> ex.tell([c.id for c in cands])         # ids, best first (here: as asked)
     >>> len(ex.ask())

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, replace
 
-from intuitf.evaluator.fitness import PressureSchedule
+from intuitf.explorer.fitness import PressureSchedule
 from intuitf.explorer.operators import PAPER_GROUPS, MutationParams
 
 ASPECT_SETS = ("quality", "intent", "edit")
@@ -48,7 +48,7 @@ class StagePreset:
     palette (colours the intent asks for), ``palette_share`` of new colours are drawn from it
     and a mutation recolours a Gaussian from it with ``recolor_prob``. ``local_share`` of the
     places that are not elites go to mutated copies of the top of the ranking (see
-    :class:`~intuitf.explorer.ga.Explorer`); the rest are bred by roulette selection,
+    :class:`~intuitf.explorer.ga.GeneticExplorer`); the rest are bred by roulette selection,
     crossover and mutation. With material hints (what the words say about single materials:
     :mod:`intuitf.explorer.hints`), ``hint_share`` of a fresh population is placed on them
     and a mutation makes a Gaussian follow its material's hint with ``hint_prob``.
