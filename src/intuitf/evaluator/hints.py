@@ -8,8 +8,9 @@ and tail quantiles of :func:`intuitf.tf.defaults.find_materials`):
 
 - **Hounsfield units**, when the volume is CT in HU (values reach about -1000, air): each
   material at its HU range (bone 300-1900, fat -150 to -50, ...);
-- otherwise by **role and density order**: skin and soft tissue on the main low material,
-  bone on the first material clearly above it, enamel, teeth and metal on the highest, dentin
+- otherwise by **role and density order**: soft tissue on the main low material, skin on
+  the body's surface (the values between the background and it), bone on the first
+  material clearly above it, enamel, teeth and metal on the highest, dentin
   below enamel; "the engine block", "the body", "the object" on the material most voxels
   hold; "dense parts" on the first material above that; "core", "inner", "densest" on the
   highest; "outline", "surface", "outer", "shell" on the boundary between the background and
@@ -109,14 +110,24 @@ _MORE_OPAQUE = re.compile(r"\b(more (opaque|solid|visible)|less (transparent|fai
 _LESS_OPAQUE = re.compile(r"\b(more (transparent|translucent|faint)|less (opaque|solid|visible)|"
                           r"fainter|lighter|thinner|weaker|transparent|translucent|faint)\b")  # fmt: skip
 
-#: Gaussian heights (opacity per unit length) for each look; None: the Explorer's default range.
-HEIGHT_BANDS: dict[str, tuple[float, float] | None] = {
+#: Gaussian heights (opacity per unit length) for each look (None: hidden, height 0). A
+#: material that fills space gathers opacity along a long path; a surface (the boundary
+#: between the background and the body: skin, an outline) is a thin layer of partial-volume
+#: values and needs more to show at all.
+HEIGHT_BANDS: dict[str | None, tuple[float, float] | None] = {
     "opaque": (0.3, 1.0),
     "semi": (0.01, 0.12),
     "faint": (0.003, 0.04),
-    "hidden": None,  # handled as height 0
+    "hidden": None,
     None: (0.02, 0.7),  # named but no opacity word: visible
-}  # type: ignore[dict-item]
+}
+SURFACE_BANDS: dict[str | None, tuple[float, float] | None] = {
+    "opaque": (0.4, 1.0),
+    "semi": (0.08, 0.4),
+    "faint": (0.03, 0.15),
+    "hidden": None,
+    None: (0.05, 0.8),
+}
 
 #: Words that carry no material, colour or opacity but are understood (or harmless).
 _KNOWN_WORDS = set(
@@ -132,6 +143,7 @@ _KNOWN_WORDS = set(
     volume data scan ct mri image picture view human ray rays value values density
     painted paint in into over under around behind front back against background instead
     same whole change changed turn turned set should can could must so then there here
+    inside within through beneath underneath between among above below near
     where which what see seen one two three both either neither like style tone toned
     bright brighter dark darker light pale deep vivid rich soft strong""".split()
 )
@@ -167,7 +179,8 @@ class MaterialHint:
     @property
     def height_band(self) -> tuple[float, float] | None:
         """The Gaussian heights the look asks for (None: hidden, height 0)."""
-        return HEIGHT_BANDS.get(self.opacity, HEIGHT_BANDS[None])
+        bands = SURFACE_BANDS if self.role in ("boundary", "skin") else HEIGHT_BANDS
+        return bands.get(self.opacity, bands[None])
 
     def to_explorer(self) -> dict:
         """The hint as the Explorer takes it (:class:`intuitf.explorer.hints.Hint`)."""
@@ -389,6 +402,7 @@ class _Layout:
     background: float
     slots: list[tuple[float, float, float]]  # (center, spread, fraction), by value
     main: int
+    cutoff: float = 0.0
 
     @classmethod
     def of(cls, counts: np.ndarray, mats) -> _Layout:
@@ -402,16 +416,33 @@ class _Layout:
         if not slots:
             slots = [(0.5, 0.05, 1.0)]
         main = int(np.argmax([s[2] for s in slots]))
-        return cls(background, slots, main)
+        return cls(background, slots, main, float(cut))
+
+    @property
+    def first_real(self) -> float:
+        """The first material that holds a twentieth of the voxels (not a shoulder of the
+        background's noise), else the main one."""
+        for c, _, frac in self.slots:
+            if frac >= 0.05:
+                return c
+        return self.slots[self.main][0]
 
     @property
     def boundary(self) -> float:
-        """Where the background meets the first material (partial-volume surfaces)."""
-        return (self.background + self.slots[0][0]) / 2.0
+        """Where the background meets the body: the partial-volume values of its surface.
+
+        Halfway between the background's mode and the first real material, but clear of the
+        background's own tail (at least 15 % of the way from the histogram's valley).
+        """
+        first = self.first_real
+        return max((self.background + first) / 2.0, self.cutoff + 0.15 * (first - self.cutoff))
 
     @property
     def boundary_spread(self) -> float:
-        return max(0.01, (self.slots[0][0] - self.background) / 6.0)
+        """Narrow enough that the Gaussian's tail stays off the background (a faint tail
+        over the many background voxels is a veil over the whole box)."""
+        b = self.boundary
+        return max(0.008, min((self.first_real - b) / 3.0, (b - self.background) / 4.0))
 
     def _peaks_above(self, value: float, gap: float) -> list[int]:
         return [i for i, s in enumerate(self.slots) if s[0] > value + gap]
@@ -426,10 +457,9 @@ class _Layout:
         if role in ("main", "soft"):
             i = main
         elif role == "skin":
-            # The first material, unless it is a sliver next to the background (a shoulder
-            # of the air's noise: painting it paints haze): then the main one.
-            i = 0 if s[0][2] >= 0.05 else main
-            i = min(i, main)
+            # What shows skin in a rendering is the body's surface: the partial-volume
+            # values between the background and the body (the tissue itself fills space).
+            return self.boundary, self.boundary_spread
         elif role == "low":
             i = 0 if s[0][2] >= 0.05 else min(1, top)
         elif role == "middle":
@@ -467,7 +497,7 @@ def _keep_density_order(hints: list[MaterialHint], layout: _Layout) -> list[Mate
     )
     if len(todo) < 2:
         return hints
-    want = [1 + layout.slot_of(hints[k].center) for k in todo]  # type: ignore[arg-type]
+    want = [int(np.argmin([abs(hints[k].center - c) for c, _ in slots])) for k in todo]  # type: ignore[operator]
     n, m = len(todo), len(slots)
     inf = float("inf")
     cost = np.full((n, m), inf)

@@ -132,6 +132,8 @@ _CONTRAST_RE = re.compile(r"\bhigh[- ]contrast\b")
 _NAMED_DELTA_E = 25.0
 #: Share of the foreground at which a named colour counts as fully present.
 _NAMED_SATURATION = 0.05
+#: Share of the foreground at which a colour a clause names counts as fully shown.
+_CLAUSE_SATURATION = 0.2
 #: Mean ΔE from the background that counts as "semi-opaque" (between faint and solid).
 _SEMI_TARGET = 35.0
 
@@ -362,6 +364,8 @@ class MetricJudge:
             # modifier, so one opaque layer painting everything cannot satisfy both.
             for name, mod in clauses:
                 parts.append(_clause_presence(f, name, mod))
+            # Colours nobody asked for count against (a green skull for "ivory bone").
+            parts.append(1.0 - min(1.0, 2.0 * _off_palette(f, [n for n, _ in clauses])))
         else:
             names = [name for name, _ in clauses]
             if names:
@@ -466,7 +470,7 @@ def _clause_presence(f: _Features, name: str, mod: str | None) -> float:
     if mod in (None, "opaque") or np.hypot(target[1], target[2]) < 12:
         # Achromatic colours (white, ivory, grey) have no hue to follow: match them directly.
         near = np.linalg.norm(pix - target, axis=1) < _NAMED_DELTA_E
-        return float(min(1.0, near.mean() / _NAMED_SATURATION))
+        return _saturating(near.mean(), _CLAUSE_SATURATION)
     hue = np.arctan2(pix[:, 2], pix[:, 1])
     chroma = np.hypot(pix[:, 1], pix[:, 2])
     t_hue = np.arctan2(target[2], target[1])
@@ -475,7 +479,40 @@ def _clause_presence(f: _Features, name: str, mod: str | None) -> float:
     if mod == "faint":
         solid = np.linalg.norm(pix - target, axis=1) < _NAMED_DELTA_E * 0.6
         tinted &= ~solid
-    return float(min(1.0, tinted.mean() / (_NAMED_SATURATION * 2)))
+    return _saturating(tinted.mean(), _CLAUSE_SATURATION * 1.5)
+
+
+def _saturating(share: float, full: float) -> float:
+    """``share`` of the foreground as a score that rises steeply, then slowly up to ``full``.
+
+    Half the score comes by a tenth of ``full`` (the colour is there at all), the rest in
+    proportion up to ``full`` (it is there in strength): a named colour on a few pixels no
+    longer scores like one on the whole structure.
+    """
+    return float(0.5 * min(1.0, share / (0.1 * full)) + 0.5 * min(1.0, share / full))
+
+
+def _off_palette(f: _Features, names: Sequence[str]) -> float:
+    """Share of the foreground in a clear colour (chroma > 20) that none of ``names`` is near.
+
+    A chromatic name covers hues within 35 degrees of its own; achromatic names (white,
+    ivory, grey) cover no clear colour.
+    """
+    pix = f.lab[f.fg]
+    if pix.shape[0] == 0:
+        return 0.0
+    chroma = np.hypot(pix[:, 1], pix[:, 2])
+    clear = chroma > 20.0
+    if not clear.any():
+        return 0.0
+    hue = np.arctan2(pix[clear, 2], pix[clear, 1])
+    covered = np.zeros(hue.shape, bool)
+    for t in _named_lab(list(names)):
+        if np.hypot(t[1], t[2]) < 12.0:
+            continue
+        dh = np.abs(np.angle(np.exp(1j * (hue - np.arctan2(t[2], t[1])))))
+        covered |= dh < np.radians(35)
+    return float((~covered).sum()) / pix.shape[0]
 
 
 def _colour_presence(f: _Features, names: Sequence[str], region: np.ndarray) -> float:

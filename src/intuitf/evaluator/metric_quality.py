@@ -9,7 +9,8 @@ image, so that renderings of any size compare alike):
 - **veil** (haze): share of the foreground that is dim (within ΔE 40 of the background) and
   nearly colourless (CIELAB saturation C*/sqrt(C*² + L*²) below 0.25), and an area rather
   than a line (what survives a 3 x 3 opening): a grey fog over empty space. Faint context
-  that carries a colour (a translucent red skin) is not veil. Up to a tenth of the
+  that carries a colour (a translucent red skin) is not veil, unless it is barely seen
+  (within ΔE 8 of the background: a tinted murk over the box). Up to a tenth of the
   foreground is tolerated; beyond that the clarity falls with the square of the excess.
 - **grain** (noise): the ratio of fine-scale lightness energy (the image minus its
   σ = 0.8 px blur) to medium-scale energy (σ = 0.8 minus σ = 2.5 px); edges of real
@@ -49,6 +50,8 @@ SIDE = 128
 #: Foreground pixels within this ΔE of the background and below this saturation are veil.
 VEIL_DELTA_E = 40.0
 VEIL_SATURATION = 0.25
+#: Foreground pixels this close to the background are veil whatever their colour (barely seen).
+VEIL_DIM = 8.0
 #: Share of the foreground that may be veil before the clarity falls.
 VEIL_TOLERATED = 0.1
 #: Grain (fine/medium energy ratio) above which the clarity falls, and how fast.
@@ -105,7 +108,7 @@ def quality(rgb: np.ndarray) -> Quality:
         return BLANK
     chroma = np.hypot(lab[..., 1], lab[..., 2])
     saturation = chroma / np.sqrt(chroma**2 + light**2 + 1e-6)
-    veil_px = fg & (dist < VEIL_DELTA_E) & (saturation < VEIL_SATURATION)
+    veil_px = fg & (((dist < VEIL_DELTA_E) & (saturation < VEIL_SATURATION)) | (dist < VEIL_DIM))
     # A veil is an area: thin grey lines (fine vessels, edges seen at 128 px) are structure.
     veil_px = ndimage.binary_opening(veil_px, structure=np.ones((3, 3), bool))
     veil = float(veil_px.sum()) / n
