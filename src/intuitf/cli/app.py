@@ -30,6 +30,7 @@ COMMAND_MODULES = [
     "intuitf.cli.export_cmds",
     "intuitf.cli.optimize_cmds",
     "intuitf.cli.serve_cmds",
+    "intuitf.cli.batch_cmds",
 ]
 
 for _name in COMMAND_MODULES:

@@ -1,0 +1,777 @@
+"""Running a batch: one run per volume, on a local process pool or on Ray, resumable.
+
+**Workers.** A worker is a process (pool) or a Ray actor. Each drives up to ``per_worker``
+volumes at once in one event loop: their renders take turns on the process's render thread
+(CPU), while their judge calls (I/O) are all in flight together, so a worker is rarely idle
+waiting for a model. The driver hands each worker a new volume whenever it has room.
+
+**Each volume** gets its own run folder ``DIR/runs/KEY`` driven through
+:meth:`Session.open` (new) or :meth:`Session.resume` (unfinished), whose lock keeps it to one
+process. Its first population holds the reference TF carried to this volume
+(:mod:`intuitf.batch.transfer`). Its judge checks the batch's shared budget before every call
+(:class:`~intuitf.batch.budget.SharedBudget`) and, with a rate limit, waits for its turn
+(:class:`JudgeLimiter`). When it ends, its result (status, similarity of its best rendering to
+the reference picture, calls, cost, time) is written to ``DIR/results/KEY.json``.
+
+**Resuming.** Run the same command again (or ``intuitf batch --resume DIR``): finished volumes
+are skipped, unfinished ones resumed from their checkpoints, with every answer already paid for
+taken from their verdict stores. A volume that cannot be read is reported and skipped.
+
+**Stopping.** Ctrl-C cancels every run between two matches (each is resumed later with nothing
+repeated); a killed batch takes its worker processes with it and resumes the same way.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import os
+import signal
+import threading
+import time
+import traceback
+from collections import deque
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from intuitf.batch.plan import VolumeItem
+from intuitf.errors import IntuitfError
+
+log = logging.getLogger(__name__)
+
+#: Statuses a volume can end a batch pass with.
+FINISHED = "completed"
+RAY_HINT = 'Install Ray with: pip install "intuitf[ray]"  (or: pip install ray)'
+
+
+@dataclass
+class BatchConfig:
+    """What every worker needs to run any volume of the batch (plain, picklable data)."""
+
+    root: str
+    #: RunSpec fields shared by every volume: intent, judge and settings.
+    template: dict
+    #: Reader options (max_dim, shape, dtype, ...) for every volume.
+    reader: dict = field(default_factory=dict)
+    #: Seed each first population with the reference TF carried to the volume.
+    carry: bool = True
+    per_worker: int = 4
+    #: Judge requests in flight per worker (None: no limit beyond the judge's own).
+    max_in_flight: int | None = None
+    #: Judge requests per second per worker (None: no limit).
+    rate_per_s: float | None = None
+    numba_threads: int | None = None
+
+    @property
+    def uses_model(self) -> bool:
+        return str(self.template.get("judge", {}).get("spec", "metric")) != "metric"
+
+
+def runs_dir(root: str | Path) -> Path:
+    return Path(root) / "runs"
+
+
+def results_dir(root: str | Path) -> Path:
+    return Path(root) / "results"
+
+
+def read_result(root: str | Path, key: str) -> dict | None:
+    p = results_dir(root) / f"{key}.json"
+    try:
+        return json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError):
+        return None
+
+
+def write_result(root: str | Path, result: dict) -> None:
+    from intuitf.session.rundir import atomic_write_json
+
+    atomic_write_json(results_dir(root) / f"{result['key']}.json", result)
+
+
+def is_finished(root: str | Path, key: str) -> bool:
+    """The volume's run completed and its result and best rendering are there."""
+    res = read_result(root, key)
+    return bool(
+        res
+        and res.get("status") == FINISHED
+        and (runs_dir(root) / key / "best" / "rank01.png").exists()
+    )
+
+
+def _base_result(item: VolumeItem) -> dict:
+    return {
+        "key": item.key,
+        "label": item.label,
+        "source": item.source,
+        "kind": item.kind,
+        "status": "pending",
+        "message": "",
+        "generations_done": 0,
+        "generations": None,
+        "calls": 0,
+        "cached_calls": 0,
+        "cost_usd": 0.0,
+        "seconds": 0.0,
+        "render_s": 0.0,
+        "judge_s": 0.0,
+        "similarity": None,
+        "start_similarity": None,
+        "best_png": None,
+        "best_tf": None,
+        "run_dir": None,
+        "attempts": 0,
+    }
+
+
+# -- limiting judge calls per worker ----------------------------------------------------------
+class JudgeLimiter:
+    """At most ``max_in_flight`` comparisons at once and ``rate_per_s`` started per second, for
+    all the runs of one worker (a provider's limit, divided among the workers)."""
+
+    def __init__(self, max_in_flight: int | None = None, rate_per_s: float | None = None) -> None:
+        self.max_in_flight = max_in_flight
+        self.rate_per_s = rate_per_s
+        self._sem: asyncio.Semaphore | None = None
+        self._next = 0.0
+        self._lock: asyncio.Lock | None = None
+
+    async def __aenter__(self) -> JudgeLimiter:
+        if self.max_in_flight:
+            if self._sem is None:
+                self._sem = asyncio.Semaphore(int(self.max_in_flight))
+            await self._sem.acquire()
+        if self.rate_per_s:
+            if self._lock is None:
+                self._lock = asyncio.Lock()
+            async with self._lock:
+                now = time.monotonic()
+                start = max(now, self._next)
+                self._next = start + 1.0 / float(self.rate_per_s)
+            if start > now:
+                await asyncio.sleep(start - now)
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        if self._sem is not None:
+            self._sem.release()
+
+
+class ThrottledJudge:
+    """A judge that waits for the worker's :class:`JudgeLimiter` before each comparison."""
+
+    def __init__(self, judge: Any, limiter: JudgeLimiter) -> None:
+        self._judge = judge
+        self._limiter = limiter
+        self.name = getattr(judge, "name", type(judge).__name__)
+
+    async def compare(self, first, second, aspects, intent):
+        async with self._limiter:
+            return await self._judge.compare(first, second, aspects, intent)
+
+    def __getattr__(self, name: str):
+        return getattr(self._judge, name)
+
+
+# -- one volume --------------------------------------------------------------------------------
+class _Timing:
+    """Where a run's time goes: renders (busy time on the render thread) and judging (from the
+    end of a generation's renders to its end)."""
+
+    def __init__(self, session) -> None:
+        self.render_s = 0.0
+        self.judge_s = 0.0
+        self._rendered_at: float | None = None
+        image, cache = session.image, session.sample_cache
+
+        def timed_image(cid, tf):
+            t = time.perf_counter()
+            try:
+                return image(cid, tf)
+            finally:
+                self.render_s += time.perf_counter() - t
+
+        def timed_cache():
+            t = time.perf_counter()
+            try:
+                return cache()
+            finally:
+                self.render_s += time.perf_counter() - t
+
+        session.image = timed_image
+        session.sample_cache = timed_cache
+        self.unsubscribe = session.events.subscribe(self._on_event)
+
+    def _on_event(self, e) -> None:
+        if e.type == "rendered":
+            self._rendered_at = time.perf_counter()
+        elif e.type in ("generation_ended", "run_ended") and self._rendered_at is not None:
+            self.judge_s += time.perf_counter() - self._rendered_at
+            self._rendered_at = None
+
+
+class WorkerCore:
+    """Runs volumes of a batch inside one event loop (a pool process or a Ray actor)."""
+
+    def __init__(self, config: BatchConfig, ledger: Any = None) -> None:
+        from intuitf.batch.reference import Reference
+
+        self.config = config
+        self.root = Path(config.root)
+        self.ledger = ledger if config.uses_model else None
+        self.reference = Reference.load_saved(self.root / "reference")
+        self.limiter = (
+            JudgeLimiter(config.max_in_flight, config.rate_per_s)
+            if config.max_in_flight or config.rate_per_s
+            else None
+        )
+        self.active: dict[str, Any] = {}
+        self.stopping = False
+
+    def stop(self) -> None:
+        """Cancel every run between two matches (each is resumed later, nothing repeated)."""
+        self.stopping = True
+        for session in list(self.active.values()):
+            try:
+                session.cancel()
+            except Exception:  # noqa: BLE001 - stopping must reach every run
+                pass
+
+    async def run(self, item: VolumeItem) -> dict:
+        """Run (or resume, or skip) one volume; never raises: the result says what happened."""
+        t0 = time.perf_counter()
+        prev = read_result(self.root, item.key) or {}
+        result = {**_base_result(item), **{k: prev[k] for k in prev if k in ("seconds",
+                  "render_s", "judge_s", "attempts", "start_similarity")}}  # fmt: skip
+        result["attempts"] = int(result.get("attempts") or 0)
+        try:
+            result = await self._run(item, result)
+        except IntuitfError as exc:
+            result.update(status="failed", message=_message(exc))
+        except Exception as exc:  # noqa: BLE001 - one volume's bug must not stop the batch
+            log.error("volume %s failed:\n%s", item.key, traceback.format_exc())
+            result.update(status="failed", message=f"{type(exc).__name__}: {exc}")
+        result["seconds"] = float(result.get("seconds") or 0.0) + (time.perf_counter() - t0)
+        result["worker"] = os.getpid()
+        try:
+            write_result(self.root, result)
+        except IntuitfError as exc:
+            result["message"] = (result.get("message") or "") + f" (result not saved: {exc})"
+        return result
+
+    async def _run(self, item: VolumeItem, result: dict) -> dict:
+        from intuitf.session import Session
+
+        rd = runs_dir(self.root) / item.key
+        result["run_dir"] = str(rd)
+        if is_finished(self.root, item.key):
+            prev = read_result(self.root, item.key) or {}
+            prev.pop("seconds", None)
+            return {**result, **prev, "skipped": True, "seconds": 0.0}
+        if self.stopping:
+            return {**result, "status": "interrupted", "message": "The batch was stopped first."}
+        if self.ledger is not None and self.ledger.totals().exhausted:
+            status = "budget"
+            return {**result, "status": status,
+                    "message": "The batch's budget was spent before this volume's turn."}  # fmt: skip
+        result["attempts"] += 1
+        if (rd / "run.json").exists():
+            session = await asyncio.to_thread(Session.resume, rd)
+        else:
+            session, start_sim = await asyncio.to_thread(self._open, item, rd)
+            result["start_similarity"] = start_sim
+        self.active[item.key] = session
+        try:
+            if self.ledger is not None:
+                from intuitf.batch.budget import attach_shared_budget
+
+                attach_shared_budget(session.judge, self.ledger, item.key)
+            if self.limiter is not None:
+                session.judge = ThrottledJudge(session.judge, self.limiter)
+            timing = _Timing(session)
+            if self.stopping:
+                session.cancel()
+            outcome = await session.arun()
+            timing.unsubscribe()
+        finally:
+            self.active.pop(item.key, None)
+            await session.aclose()
+        c = outcome.cost
+        result.update(
+            status=outcome.reason,
+            message=outcome.message,
+            generations_done=outcome.generations_done,
+            generations=session.total_generations,
+            calls=int(c.calls),
+            cached_calls=int(c.cached_calls),
+            cost_usd=float(c.usd),
+            render_s=float(result.get("render_s") or 0.0) + timing.render_s,
+            judge_s=float(result.get("judge_s") or 0.0) + timing.judge_s,
+            run_seconds=float(c.seconds),
+        )
+        best_png, best_tf = rd / "best" / "rank01.png", rd / "best" / "rank01.tf.json"
+        if best_png.exists():
+            from intuitf.imageio import load_image
+
+            result["best_png"] = str(best_png.relative_to(self.root))
+            result["best_tf"] = str(best_tf.relative_to(self.root))
+            result["similarity"] = self.reference.similarity(load_image(best_png))
+        return result
+
+    def _open(self, item: VolumeItem, rd: Path):
+        """Read the volume, carry the reference TF to it, and open its run (a worker thread)."""
+        from intuitf.batch.transfer import transfer_tf
+        from intuitf.session import Session
+        from intuitf.volume import load_volume
+
+        vol = load_volume(item.source, **self.config.reader)
+        initial = []
+        ref = self.reference
+        if self.config.carry and ref.tf is not None:
+            counts, _ = vol.histogram()
+            carried, _ = transfer_tf(
+                ref.tf,
+                counts,
+                ref_counts=ref.counts,
+                ref_range=ref.value_range,
+                target_range=tuple(vol.value_range),
+            )
+            initial.append(carried.to_dict())
+        spec = {
+            **self.config.template,
+            "name": item.key,
+            "volume": {"source": item.source, **self.config.reader},
+            "initial": initial,
+        }
+        session = Session.open(spec, rd, volume=vol)
+        start = None
+        if initial:
+            try:
+                from intuitf.tf import GaussianTF
+
+                start = ref.similarity(session.render(GaussianTF.from_dict(initial[0])))
+            except Exception:  # noqa: BLE001 - a figure for the report, never a failure
+                start = None
+        return session, start
+
+
+def _message(exc: BaseException) -> str:
+    msg = getattr(exc, "message", None) or str(exc)
+    hint = getattr(exc, "hint", None)
+    return f"{msg} {hint}" if hint else msg
+
+
+# -- worker processes (pool) ------------------------------------------------------------------
+def _set_threads(n: int | None) -> None:
+    if not n:
+        return
+    try:
+        import numba
+
+        numba.set_num_threads(max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
+    except Exception:  # noqa: BLE001 - threads are a tuning, not a requirement
+        pass
+
+
+def _die_with_parent() -> None:
+    """Linux: this process gets SIGKILL when the batch process that started it dies."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except Exception:  # noqa: BLE001 - elsewhere a watchdog thread does it
+        pass
+    parent = os.getppid()
+
+    def watch() -> None:
+        while True:
+            time.sleep(0.5)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="batch-parent-watch").start()
+
+
+def _pool_main(config: BatchConfig, inbox, outbox, index: int) -> None:
+    """A pool worker: take volumes from ``inbox``, report to ``outbox`` (see :class:`PoolBackend`)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the driver decides how to stop
+    _die_with_parent()
+    logging.basicConfig(level=logging.WARNING)
+    _set_threads(config.numba_threads)
+    try:
+        ledger = None
+        if config.uses_model:
+            from intuitf.batch.budget import LEDGER_NAME, BatchLedger
+
+            ledger = BatchLedger(Path(config.root) / LEDGER_NAME)
+        core = WorkerCore(config, ledger)
+    except Exception as exc:  # noqa: BLE001
+        outbox.put(("fatal", index, _message(exc)))
+        return
+    asyncio.run(_pool_loop(core, inbox, outbox, index))
+
+
+async def _pool_loop(core: WorkerCore, inbox, outbox, index: int) -> None:
+    loop = asyncio.get_running_loop()
+    done = asyncio.Event()
+    futures: list = []
+
+    async def one(item_dict: dict) -> None:
+        res = await core.run(VolumeItem.from_dict(item_dict))
+        outbox.put(("done", index, res))
+
+    def reader() -> None:  # a thread: the inbox is a blocking queue
+        while True:
+            msg = inbox.get()
+            if msg is None:
+                loop.call_soon_threadsafe(done.set)
+                return
+            if msg == "stop":
+                loop.call_soon_threadsafe(core.stop)
+            else:
+                futures.append(asyncio.run_coroutine_threadsafe(one(msg), loop))
+
+    threading.Thread(target=reader, daemon=True, name="batch-inbox").start()
+    await done.wait()
+    for fut in list(futures):
+        await asyncio.wrap_future(fut)
+
+
+class PoolBackend:
+    """``workers`` local processes (spawned), one inbox each, one outbox for all."""
+
+    name = "pool"
+
+    def __init__(self, config: BatchConfig, workers: int) -> None:
+        import multiprocessing as mp
+
+        ctx = mp.get_context("spawn")
+        self.outbox = ctx.Queue()
+        self.inboxes = [ctx.Queue() for _ in range(workers)]
+        self.procs = [
+            ctx.Process(
+                target=_pool_main,
+                args=(config, self.inboxes[i], self.outbox, i),
+                name=f"intuitf-batch-{i}",
+                daemon=True,
+            )
+            for i in range(workers)
+        ]
+        for p in self.procs:
+            p.start()
+        self.workers = workers
+        self.fatal: list[str] = []
+
+    def alive(self, w: int) -> bool:
+        return self.procs[w].is_alive()
+
+    def submit(self, w: int, item: VolumeItem) -> None:
+        self.inboxes[w].put(item.to_dict())
+
+    def poll(self, timeout: float) -> list[tuple[int, dict]]:
+        import queue
+
+        out = []
+        try:
+            msg = self.outbox.get(timeout=timeout)
+        except queue.Empty:
+            return out
+        while True:
+            kind, w, payload = msg
+            if kind == "done":
+                out.append((w, payload))
+            elif kind == "fatal":
+                self.fatal.append(str(payload))
+            try:
+                msg = self.outbox.get_nowait()
+            except queue.Empty:
+                return out
+
+    def stop(self) -> None:
+        for q in self.inboxes:
+            q.put("stop")
+
+    def shutdown(self, wait: float = 30.0) -> None:
+        for q in self.inboxes:
+            try:
+                q.put(None)
+            except Exception:  # noqa: BLE001
+                pass
+        deadline = time.monotonic() + wait
+        for p in self.procs:
+            p.join(max(0.1, deadline - time.monotonic()))
+        for p in self.procs:
+            if p.is_alive():
+                p.terminate()
+                p.join(5)
+
+
+# -- Ray ---------------------------------------------------------------------------------------
+class _RayWorkerImpl:
+    """A Ray actor that runs volumes like a pool worker (async: many volumes at once)."""
+
+    def __init__(self, config: BatchConfig, ledger: Any, threads: int | None) -> None:
+        logging.basicConfig(level=logging.WARNING)
+        _set_threads(threads)
+        self.core = WorkerCore(config, ledger)
+
+    async def run(self, item: dict) -> dict:
+        return await self.core.run(VolumeItem.from_dict(item))
+
+    async def stop(self) -> None:
+        self.core.stop()
+
+    async def pid(self) -> int:
+        return os.getpid()
+
+
+def import_ray():
+    """The ``ray`` module, or one clear message saying how to install it."""
+    try:
+        import ray
+    except ImportError:
+        raise IntuitfError("--ray needs Ray, which is not installed.", RAY_HINT) from None
+    return ray
+
+
+class RayBackend:
+    """``workers`` Ray actors; ``address`` None/"local" starts a local instance, else joins."""
+
+    name = "ray"
+
+    def __init__(self, config: BatchConfig, workers: int | None, address: str | None) -> None:
+        ray = import_ray()
+        self.ray = ray
+        self.started_here = False
+        if not ray.is_initialized():
+            _ray_init(ray, address)
+        self.started_here = address in (None, "", "local")
+        ledger = None
+        if config.uses_model:
+            from intuitf.batch.budget import LEDGER_NAME, ray_ledger
+
+            ledger = ray_ledger(str(Path(config.root) / LEDGER_NAME))
+        self.ledger = ledger
+        cpus = float(ray.cluster_resources().get("CPU", 1.0))
+        self.workers = int(workers or max(1, int(cpus)))
+        per = max(0.01, cpus / self.workers)
+        threads = max(1, int(per))
+        actor = ray.remote(num_cpus=per)(_RayWorkerImpl)
+        self.actors = [actor.remote(config, ledger, threads) for _ in range(self.workers)]
+        self.refs: dict[Any, int] = {}
+        self._items: dict[Any, VolumeItem] = {}
+        self.dead: set[int] = set()
+        self.fatal: list[str] = []
+
+    def alive(self, w: int) -> bool:
+        return w not in self.dead
+
+    def submit(self, w: int, item: VolumeItem) -> None:
+        ref = self.actors[w].run.remote(item.to_dict())
+        self.refs[ref] = w
+        self._items[ref] = item
+
+    def poll(self, timeout: float) -> list[tuple[int, dict]]:
+        ray = self.ray
+        if not self.refs:
+            time.sleep(timeout)
+            return []
+        ready, _ = ray.wait(list(self.refs), num_returns=1, timeout=timeout)
+        out = []
+        for ref in ready:
+            w = self.refs.pop(ref)
+            item = self._items.pop(ref)
+            try:
+                out.append((w, ray.get(ref)))
+            except Exception as exc:  # noqa: BLE001 - the actor died (node lost, OOM, ...)
+                self.dead.add(w)
+                res = _base_result(item)
+                res.update(status="interrupted", message=f"The Ray worker was lost: {exc}")
+                out.append((w, res))
+        return out
+
+    def stop(self) -> None:
+        for a in self.actors:
+            try:
+                a.stop.remote()
+            except Exception:  # noqa: BLE001
+                pass
+
+    def shutdown(self, wait: float = 30.0) -> None:
+        handles = list(self.actors) + ([self.ledger.handle] if self.ledger is not None else [])
+        for a in handles:
+            try:
+                self.ray.kill(a)
+            except Exception:  # noqa: BLE001
+                pass
+        if self.started_here:
+            self.ray.shutdown()
+
+
+# -- the driver --------------------------------------------------------------------------------
+@dataclass
+class BatchProgress:
+    """What the driver reports as it goes (for a progress display)."""
+
+    total: int
+    done: int = 0
+    running: dict[str, float] = field(default_factory=dict)
+    results: dict[str, dict] = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def drive(
+    config: BatchConfig,
+    items: list[VolumeItem],
+    *,
+    workers: int | None = None,
+    ray_address: str | None = None,
+    use_ray: bool = False,
+    on_update: Callable[[str, VolumeItem, dict | None], None] | None = None,
+    ledger: Any = None,
+    stop_after: float | None = None,
+    max_concurrency: int | None = None,
+    rate_per_min: float | None = None,
+) -> dict[str, dict]:
+    """Run every volume of ``items`` not already finished; returns results by key.
+
+    ``on_update(event, item, result)`` is called with "skipped", "started" and "done".
+    ``max_concurrency`` (judge requests in flight) and ``rate_per_min`` (requests started per
+    minute) hold for the whole batch: each of the W workers gets a W-th of them.
+    ``stop_after`` (seconds; for tests) stops the batch like Ctrl-C after that long.
+    """
+    notify = on_update or (lambda *_: None)
+    results: dict[str, dict] = {}
+    pending: deque[VolumeItem] = deque()
+    for it in items:
+        if is_finished(config.root, it.key):
+            res = read_result(config.root, it.key) or {}
+            res["skipped"] = True
+            results[it.key] = res
+            notify("skipped", it, res)
+        else:
+            pending.append(it)
+    if not pending:
+        return results
+    if use_ray:
+        ray = import_ray()
+        if not ray.is_initialized():
+            _ray_init(ray, ray_address)
+        n_workers = int(workers or max(1, int(ray.cluster_resources().get("CPU", 1.0))))
+    else:
+        n_workers = max(1, min(workers or (os.cpu_count() or 1), len(pending)))
+        if config.numba_threads is None:
+            config.numba_threads = max(1, (os.cpu_count() or 1) // n_workers)
+    if max_concurrency:
+        config.max_in_flight = max(1, int(max_concurrency) // n_workers)
+    if rate_per_min:
+        config.rate_per_s = float(rate_per_min) / 60.0 / n_workers
+    if use_ray:
+        backend: Any = RayBackend(config, n_workers, ray_address)
+    else:
+        backend = PoolBackend(config, n_workers)
+    load = [0] * backend.workers
+    running: dict[str, tuple[int, VolumeItem]] = {}
+    started = time.monotonic()
+    stopping = False
+
+    def exhausted() -> bool:
+        return ledger is not None and config.uses_model and ledger.totals().exhausted
+
+    try:
+        while pending or running:
+            try:
+                if (
+                    stop_after is not None
+                    and not stopping
+                    and time.monotonic() - started > stop_after
+                ):
+                    raise KeyboardInterrupt
+                while pending and not stopping:
+                    live = [w for w in range(backend.workers) if backend.alive(w)]
+                    free = [w for w in live if load[w] < config.per_worker]
+                    if not live:
+                        while pending:
+                            it = pending.popleft()
+                            res = _base_result(it)
+                            res.update(
+                                status="interrupted", message="No worker was left to run it."
+                            )
+                            results[it.key] = res
+                            notify("done", it, res)
+                        break
+                    if not free:
+                        break
+                    if exhausted():
+                        while pending:
+                            it = pending.popleft()
+                            res = _base_result(it)
+                            res.update(status="budget", message="The batch's budget was spent "
+                                       "before this volume's turn.")  # fmt: skip
+                            write_result(config.root, res)
+                            results[it.key] = res
+                            notify("done", it, res)
+                        break
+                    w = min(free, key=lambda k: load[k])
+                    it = pending.popleft()
+                    backend.submit(w, it)
+                    load[w] += 1
+                    running[it.key] = (w, it)
+                    notify("started", it, None)
+                for _w, res in backend.poll(0.2):
+                    key = res.get("key")
+                    entry = running.pop(key, None)
+                    if entry is not None:
+                        load[entry[0]] -= 1
+                        results[key] = res
+                        notify("done", entry[1], res)
+                # Volumes of a worker process that died: reported, resumed by the next run.
+                for key, (w, it) in list(running.items()):
+                    if not backend.alive(w):
+                        running.pop(key)
+                        res = read_result(config.root, key) or _base_result(it)
+                        if res.get("status") in (None, "pending", FINISHED) or not res.get(
+                            "status"
+                        ):
+                            res = _base_result(it)
+                        res.update(status="interrupted",
+                                   message="Its worker process died; run the batch again to "
+                                           "resume it.")  # fmt: skip
+                        results[key] = res
+                        notify("done", it, res)
+                if getattr(backend, "fatal", None):
+                    raise IntuitfError(f"A batch worker could not start: {backend.fatal[0]}")
+            except KeyboardInterrupt:
+                if stopping:
+                    raise
+                stopping = True
+                backend.stop()
+                for it in pending:
+                    res = _base_result(it)
+                    res.update(status="interrupted", message="The batch was stopped first.")
+                    results[it.key] = res
+                pending.clear()
+    finally:
+        backend.shutdown()
+    return results
+
+
+def _ray_init(ray, address: str | None) -> None:
+    kw: dict[str, Any] = {"log_to_driver": False, "configure_logging": False}
+    try:
+        if address in (None, "", "local"):
+            ray.init(num_cpus=os.cpu_count() or 1, include_dashboard=False, **kw)
+        else:
+            ray.init(address=address, **kw)
+    except Exception as exc:  # noqa: BLE001
+        raise IntuitfError(
+            f"Could not start or join Ray at {address or 'a local instance'}: {exc}",
+            "Check the address (ray status on the head node shows it), or drop ADDRESS to "
+            "start a local instance.",
+        ) from None

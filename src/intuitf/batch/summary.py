@@ -1,0 +1,250 @@
+"""What a batch tells at the end: DIR/summary.json, a table, a contact sheet and an HTML report.
+
+Per volume: status, the similarity of its best rendering to the reference picture (colour
+distribution of the rendered materials, see :meth:`Reference.similarity`), and before the
+search (the carried TF as it came), calls, cost, time and how that time split between rendering
+and waiting for the judge. A volume is *flagged* when it did not finish or its best stays far
+from the reference (similarity below ``flag_below``): those are the scans to look at.
+"""
+
+from __future__ import annotations
+
+import html
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: Similarity under which a volume's best counts as far from the reference look.
+DEFAULT_FLAG_BELOW = 0.5
+
+
+def _num(v: Any) -> float | None:
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return None
+    return f if math.isfinite(f) else None
+
+
+def flag_reason(result: dict, flag_below: float) -> str | None:
+    """Why a volume needs a look, or None."""
+    status = result.get("status")
+    if status != "completed":
+        return f"not finished ({status})"
+    sim = _num(result.get("similarity"))
+    if sim is None:
+        return "no result rendering"
+    if sim < flag_below:
+        return f"far from the reference (similarity {sim:.2f} < {flag_below:.2f})"
+    return None
+
+
+def build_summary(
+    root: Path,
+    items: list,
+    results: dict[str, dict],
+    *,
+    flag_below: float = DEFAULT_FLAG_BELOW,
+    reference: str = "",
+    ledger: dict | None = None,
+    wall_s: float | None = None,
+    backend: str = "",
+    workers: int | None = None,
+) -> dict:
+    """The summary of the batch in ``root`` over ``items`` (results read from DIR/results)."""
+    from intuitf.batch.runner import _base_result, read_result
+
+    volumes = []
+    for it in items:
+        res = results.get(it.key) or read_result(root, it.key) or _base_result(it)
+        res = dict(res)
+        res.setdefault("key", it.key)
+        res["label"] = it.label
+        reason = flag_reason(res, flag_below)
+        res["flagged"] = reason is not None
+        res["flag"] = reason
+        volumes.append(res)
+    done = [v for v in volumes if v.get("status") == "completed"]
+    sims = [s for v in done if (s := _num(v.get("similarity"))) is not None]
+    totals = {
+        "volumes": len(volumes),
+        "completed": len(done),
+        "flagged": sum(v["flagged"] for v in volumes),
+        "failed": sum(v.get("status") == "failed" for v in volumes),
+        "calls": sum(int(v.get("calls") or 0) for v in volumes),
+        "cost_usd": sum(float(v.get("cost_usd") or 0.0) for v in volumes),
+        "volume_seconds": sum(float(v.get("seconds") or 0.0) for v in volumes),
+        "render_s": sum(float(v.get("render_s") or 0.0) for v in volumes),
+        "judge_s": sum(float(v.get("judge_s") or 0.0) for v in volumes),
+        "mean_similarity": float(np.mean(sims)) if sims else None,
+    }
+    if wall_s:
+        totals["wall_s"] = wall_s
+        totals["volumes_per_hour"] = 3600.0 * len(done) / wall_s if done else 0.0
+    return {
+        "reference": reference,
+        "flag_below": flag_below,
+        "backend": backend,
+        "workers": workers,
+        "budget": ledger,
+        "totals": totals,
+        "volumes": volumes,
+        "written": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+
+
+def write_summary(root: Path, summary: dict) -> dict[str, Path]:
+    """Write summary.json, contact_sheet.png and report.html into ``root``; their paths."""
+    from intuitf.session.rundir import atomic_write_bytes, atomic_write_json
+
+    paths = {"summary": root / "summary.json"}
+    atomic_write_json(paths["summary"], summary)
+    sheet = contact_sheet(root, summary)
+    if sheet is not None:
+        from intuitf.imageio import png_bytes
+
+        paths["contact_sheet"] = root / "contact_sheet.png"
+        atomic_write_bytes(paths["contact_sheet"], png_bytes(sheet))
+    paths["report"] = root / "report.html"
+    atomic_write_bytes(paths["report"], report_html(summary).encode("utf-8"))
+    return paths
+
+
+def contact_sheet(root: Path, summary: dict, thumb: int = 160) -> np.ndarray | None:
+    """The reference, then every volume's best, captioned (flagged ones marked '!')."""
+    from intuitf.imageio import load_image
+    from intuitf.plots import contact_sheet as sheet
+
+    images, captions = [], []
+    ref = root / "reference" / "reference.png"
+    if ref.exists():
+        images.append(load_image(ref))
+        captions.append("REFERENCE")
+    for v in summary["volumes"]:
+        png = v.get("best_png")
+        img = None
+        if png and (root / png).exists():
+            try:
+                img = load_image(root / png)
+            except Exception:  # noqa: BLE001 - an unreadable picture is shown as missing
+                img = None
+        if img is None:
+            img = np.full((thumb, thumb, 3), 40, np.uint8)
+        sim = _num(v.get("similarity"))
+        mark = "! " if v.get("flagged") else ""
+        cap = (
+            f"{mark}{v['key']} {sim:.2f}"
+            if sim is not None
+            else f"{mark}{v['key']} {v.get('status')}"
+        )
+        images.append(img)
+        captions.append(cap)
+    if not images:
+        return None
+    return sheet(images, captions, columns=min(8, max(2, len(images))), thumb=thumb)
+
+
+def _fmt(v: Any, spec: str, empty: str = "–") -> str:
+    f = _num(v)
+    return empty if f is None else format(f, spec)
+
+
+def report_html(summary: dict) -> str:
+    """A self-standing page (pictures linked relative to the batch folder)."""
+    t = summary["totals"]
+    rows = []
+    for v in summary["volumes"]:
+        flagged = v.get("flagged")
+        img = (
+            f'<a href="{html.escape(v["best_png"])}"><img src="{html.escape(v["best_png"])}" '
+            'width="128" height="128" loading="lazy"></a>'
+            if v.get("best_png")
+            else ""
+        )
+        report = (
+            f'<a href="runs/{html.escape(v["key"])}/report.html">run</a>'
+            if v.get("run_dir")
+            else ""
+        )
+        rows.append(
+            f'<tr class="{"flag" if flagged else ""}"><td>{img}</td>'
+            f"<td><b>{html.escape(str(v['key']))}</b><br><small>{html.escape(str(v.get('source', '')))}</small></td>"
+            f"<td>{html.escape(str(v.get('status')))}</td>"
+            f"<td>{_fmt(v.get('similarity'), '.3f')}</td>"
+            f"<td>{_fmt(v.get('start_similarity'), '.3f')}</td>"
+            f"<td>{int(v.get('calls') or 0)}</td>"
+            f"<td>${_fmt(v.get('cost_usd'), '.4f', '0')}</td>"
+            f"<td>{_fmt(v.get('seconds'), '.1f')}</td>"
+            f"<td>{_fmt(v.get('render_s'), '.1f')} / {_fmt(v.get('judge_s'), '.1f')}</td>"
+            f"<td>{html.escape(v.get('flag') or '')}<br><small>{html.escape(str(v.get('message') or ''))[:300]}</small></td>"
+            f"<td>{report}</td></tr>"
+        )
+    budget = summary.get("budget") or {}
+    limit = []
+    if budget.get("max_calls") is not None:
+        limit.append(f"{budget['max_calls']} calls")
+    if budget.get("max_usd") is not None:
+        limit.append(f"${budget['max_usd']:.2f}")
+    budget_line = (
+        f"Budget: {' and '.join(limit)}; counted {budget.get('paid_calls', 0) + budget.get('in_flight', 0) + budget.get('lost', 0)} calls "
+        f"(${budget.get('paid_usd', 0.0):.4f} paid)."
+        if limit
+        else "No batch budget."
+    )
+    mean = t.get("mean_similarity")
+    return f"""<!doctype html>
+<html><head><meta charset="utf-8"><title>intuitf batch</title>
+<style>
+body {{ font-family: system-ui, sans-serif; margin: 1.5em; background: #fafafa; color: #18181b; }}
+table {{ border-collapse: collapse; width: 100%; }}
+td, th {{ border-bottom: 1px solid #ddd; padding: 4px 8px; text-align: left; vertical-align: middle; }}
+tr.flag {{ background: #fee2e2; }}
+img {{ background: #000; }}
+small {{ color: #52525b; }}
+</style></head><body>
+<h1>intuitf batch</h1>
+<p><img src="reference/reference.png" width="192" height="192" alt="reference"><br>
+Reference: {html.escape(str(summary.get("reference", "")))}</p>
+<p>{t["volumes"]} volumes: {t["completed"]} completed, {t["flagged"]} flagged (not finished, or
+similarity below {summary["flag_below"]:.2f}), {t["failed"]} failed to load or run.
+Mean similarity of the completed: {_fmt(mean, ".3f")}. {t["calls"]} model calls,
+${t["cost_usd"]:.4f}. {html.escape(budget_line)}</p>
+<p><a href="contact_sheet.png">Contact sheet</a> · <a href="summary.json">summary.json</a></p>
+<table><tr><th>best</th><th>volume</th><th>status</th><th>similarity</th><th>before search</th>
+<th>calls</th><th>cost</th><th>time (s)</th><th>render / judge (s)</th><th>flag</th><th></th></tr>
+{"".join(rows)}
+</table>
+<p><small>Similarity: colour distribution of the rendered materials against the reference picture
+(intersection of CIELAB histograms minus mean-colour distance / 100; 1 = same colours in the
+same shares). "Before search": the reference TF carried to the volume, as it came.</small></p>
+</body></html>
+"""
+
+
+def summary_table(summary: dict):
+    """A Rich table of the batch, one row per volume."""
+    from rich.table import Table
+
+    table = Table(title="Batch", show_lines=False)
+    for col, just in (("volume", "left"), ("status", "left"), ("similarity", "right"),
+                      ("before", "right"), ("calls", "right"), ("cost", "right"),
+                      ("time", "right"), ("render/judge", "right"), ("", "left")):  # fmt: skip
+        table.add_column(col, justify=just)  # type: ignore[arg-type]
+    for v in summary["volumes"]:
+        style = "red" if v.get("flagged") else None
+        table.add_row(
+            str(v["key"]),
+            str(v.get("status")) + (" (done before)" if v.get("skipped") else ""),
+            _fmt(v.get("similarity"), ".3f"),
+            _fmt(v.get("start_similarity"), ".3f"),
+            str(int(v.get("calls") or 0)),
+            f"${_fmt(v.get('cost_usd'), '.4f', '0')}",
+            f"{_fmt(v.get('seconds'), '.1f')} s",
+            f"{_fmt(v.get('render_s'), '.1f')}/{_fmt(v.get('judge_s'), '.1f')} s",
+            "flagged" if v.get("flagged") else "",
+            style=style,
+        )
+    return table
