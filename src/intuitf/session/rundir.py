@@ -21,7 +21,6 @@ from __future__ import annotations
 import errno
 import json
 import os
-import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
@@ -38,22 +37,10 @@ def _disk_full_error(path: Path, exc: OSError) -> SessionError:
 
 def atomic_write_bytes(path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` so that readers see the old file or the new one, never half."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except OSError as exc:
-        Path(tmp).unlink(missing_ok=True)
-        if exc.errno == errno.ENOSPC:
-            raise _disk_full_error(path, exc) from exc
-        raise SessionError(f"Cannot write {path}: {exc.strerror or exc}.") from exc
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    from intuitf.fileio import atomic_write_bytes as write
+
+    write(path, data, error=SessionError, hint=None,
+          full_hint="Free some space, then continue with --resume.")  # fmt: skip
 
 
 def atomic_write_json(path: Path, obj: Any) -> None:

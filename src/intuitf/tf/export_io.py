@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 from intuitf.errors import TransferFunctionError
@@ -31,22 +30,8 @@ def write_export(
 ) -> Path:
     """Write ``tf`` in format ``fmt`` to ``path`` atomically and return the path."""
     text = export_tf(tf, fmt, value_range, unit_distance=unit_distance)
-    p = Path(path)
-    try:
-        p.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=f".{p.name}.", suffix=".tmp")
-    except OSError as exc:
-        raise TransferFunctionError(
-            f"Cannot write {p}: {exc.strerror or exc}.", "Choose a folder you can write to."
-        ) from exc
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
-            fh.write(text)
-        os.replace(tmp, p)
-    except OSError as exc:
-        Path(tmp).unlink(missing_ok=True)
-        raise TransferFunctionError(f"Cannot write {p}: {exc.strerror or exc}.") from exc
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return p
+    from intuitf.fileio import atomic_write_text
+
+    return atomic_write_text(
+        path, text, error=TransferFunctionError, hint="Choose a folder you can write to."
+    )

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 from intuitf.errors import TransferFunctionError
@@ -27,14 +26,6 @@ def load_tf(path: str | os.PathLike) -> GaussianTF:
 
 def save_tf(tf: GaussianTF, path: str | os.PathLike) -> Path:
     """Write ``tf`` as JSON atomically (a crash never leaves half a file)."""
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=f".{p.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(tf.to_json())
-        os.replace(tmp, p)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return p
+    from intuitf.fileio import atomic_write_text
+
+    return atomic_write_text(path, tf.to_json(), error=TransferFunctionError)
