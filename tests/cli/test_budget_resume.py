@@ -189,3 +189,18 @@ def test_run_folder_of_a_budget_stop_is_resumable_by_path_only(tmp_path):
                         "--budget-calls", "0", "-o", str(run), check=False)  # fmt: skip
         assert proc.returncode == 3 and srv.stats.requests == 0
     assert "budget" in proc.stdout.lower() and Path(run / "run.json").exists()
+
+
+@pytest.mark.slow
+def test_an_overwritten_run_counts_only_its_own_spend(tmp_path):
+    run = tmp_path / "run"
+    with FakeMLLMServer(target=_target()) as srv:
+        spec = ["--evaluator", srv.base_url]
+        _intuitf("optimize", "phantom", *COMMON, *spec, "--budget-calls", "30", "-o", str(run),
+                 check=False)  # fmt: skip
+        before = srv.stats.requests
+        again = _intuitf("optimize", "phantom", *COMMON, "--seed", "4", *spec, "--budget-calls",
+                         "20", "--overwrite", "-o", str(run), check=False)  # fmt: skip
+        assert again.returncode == 3, (again.stdout, again.stderr)
+        assert srv.stats.requests - before == 20
+        assert _paid(again.stdout) == 20  # not 50: the replaced run's spend is not this run's

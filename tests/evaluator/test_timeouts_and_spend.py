@@ -12,7 +12,13 @@ import pytest
 
 from intuitf.errors import BudgetExhausted, IntuitfError, JudgeError
 from intuitf.evaluator.aspects import aspects_for
-from intuitf.evaluator.budget import Budget, restore_budget, run_spend, with_spend
+from intuitf.evaluator.budget import (
+    Budget,
+    reset_spend,
+    restore_budget,
+    run_spend,
+    with_spend,
+)
 from intuitf.evaluator.cache import VerdictCache
 from intuitf.evaluator.factory import (
     judge_record,
@@ -152,6 +158,9 @@ def test_a_resume_restores_the_budget_from_the_store(tmp_path):
     assert run_spend(J, tmp_path / "another.sqlite") is None  # not this run's store
     cost = with_spend(Cost(calls=5, cached_calls=7, seconds=3.0), spent)
     assert (cost.calls, cost.cached_calls, cost.seconds, cost.input_tokens) == (60, 7, 3.0, 6000)
+    # A new run in the folder (--overwrite): its spend and budget start from nothing.
+    reset_spend(J, path)
+    assert J.budget.calls == 0 and J.cache.spent() == Cost() and J.cache.unsettled()[0] == 0
 
 
 @pytest.mark.parametrize("kw", [{"max_calls": -1}, {"max_usd": -0.5}, {"max_usd": float("nan")}])

@@ -151,7 +151,12 @@ def restore_budget(judge: Any, store_path: str | os.PathLike | None) -> Cost | N
 
 
 def reset_spend(judge: Any, store_path: str | os.PathLike | None) -> None:
-    """A new run in this folder: forget the spend of any run that was there before."""
+    """A new run in this folder: forget the spend of any run that was there before (the
+    answers stay, to be reused), and start the judge's budget from nothing."""
     store = _store_of(judge, store_path)
-    if store is not None:
-        store.clear_spend()
+    if store is None:
+        return
+    store.clear_spend()
+    budget = getattr(judge, "budget", None)
+    if isinstance(budget, Budget):
+        budget.restore(Cost())

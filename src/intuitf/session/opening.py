@@ -172,6 +172,9 @@ class SessionOpening:
                 raise SessionError(f"Cannot refine: {exc}") from exc
         if rd is not None:
             rd.create(overwrite=overwrite)
+            from intuitf.evaluator.budget import reset_spend
+
+            reset_spend(judge, rd.verdicts)  # a new run has paid nothing yet (--overwrite)
             spec = _spec_for_record(spec, intent, settings, initial, judge, rd)
             from intuitf.session.building import redacted
 
