@@ -335,7 +335,12 @@ class Session(SessionOpening, SessionInteraction):
             for c in candidates:
                 self.tfs[c.id] = c.tf
             sched = render_scheduler()
-            await sched.run(self.sample_cache, BATCH)
+            cache = await sched.run(self.sample_cache, BATCH)
+            todo = [c for c in candidates if c.id not in self._images]
+            if getattr(self.renderer, "device", "cpu") == "cuda" and todo:
+                # On the GPU a whole generation renders in one launch.
+                batch = await sched.run(lambda: cache.render_many([c.tf for c in todo]), BATCH)
+                self._images.update({c.id: img for c, img in zip(todo, batch, strict=True)})
             images = []
             for c in candidates:  # one job each, so interactive renders can go between them
                 images.append(await sched.run(lambda c=c: self.image(c.id, c.tf), BATCH))
