@@ -1,14 +1,23 @@
-"""Reading and writing pictures (PNG out; PNG, JPEG, ... in) with Pillow."""
+"""Reading and writing pictures (PNG and JPEG out; PNG, JPEG, ... in) with Pillow.
+
+Every rendering intuitf writes carries a small record of how it was made, so a sketch drawn on
+it can be judged from the same view: the camera (:meth:`Camera.to_dict`), the picture size and
+the volume's name, as JSON in a PNG ``tEXt`` chunk with the key ``intuitf`` (in a JPEG, a
+comment that starts with ``intuitf:``). :func:`read_render_metadata` reads it back.
+"""
 
 from __future__ import annotations
 
 import io
+import json
 import os
-import tempfile
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from PIL import Image, UnidentifiedImageError
+from PIL.PngImagePlugin import PngInfo
 
 from intuitf.errors import IntuitfError
 
@@ -30,33 +39,100 @@ def _as_uint8(image: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a)
 
 
-def png_bytes(image: np.ndarray) -> bytes:
-    """The image (uint8, or float in [0, 1]) encoded as PNG."""
+#: The PNG text key (and JPEG comment prefix) of a rendering's record.
+METADATA_KEY = "intuitf"
+
+#: File-name suffixes :func:`save_image` writes, and the format of each.
+IMAGE_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG"}
+
+
+def render_record(
+    camera: Any,
+    size: tuple[int, int] | int,
+    volume: str | None = None,
+    **extra: Any,
+) -> dict:
+    """The record a rendering carries: ``camera`` (a Camera or its dict), ``size`` (width,
+    height) in pixels, the volume's name, and any ``extra`` facts (shading, background ...)."""
+    cam = camera.to_dict() if hasattr(camera, "to_dict") else dict(camera)
+    w, h = (size, size) if isinstance(size, int) else size
+    rec = {"camera": cam, "size": [int(w), int(h)], "volume": volume}
+    rec.update(extra)
+    return rec
+
+
+def _encode(image: np.ndarray, fmt: str, metadata: Mapping | None) -> bytes:
     buf = io.BytesIO()
-    Image.fromarray(_as_uint8(image)).save(buf, format="PNG")
+    img = Image.fromarray(_as_uint8(image))
+    text = json.dumps(metadata, sort_keys=True) if metadata is not None else None
+    if fmt == "PNG":
+        info = None
+        if text is not None:
+            info = PngInfo()
+            info.add_text(METADATA_KEY, text)
+        img.save(buf, format="PNG", pnginfo=info)
+    else:
+        kw: dict[str, Any] = {"quality": 95}
+        if text is not None:
+            kw["comment"] = f"{METADATA_KEY}:{text}".encode()
+        img.convert("RGB").save(buf, format=fmt, **kw)
     return buf.getvalue()
 
 
-def save_png(image: np.ndarray, path: str | os.PathLike) -> Path:
-    """Write ``image`` as a PNG atomically: a crash never leaves half a file at ``path``."""
-    p = Path(path)
-    data = png_bytes(image)
-    try:
-        p.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
-        try:
-            with os.fdopen(fd, "wb") as f:
-                f.write(data)
-            os.replace(tmp, p)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-    except OSError as exc:
+def png_bytes(image: np.ndarray, metadata: Mapping | None = None) -> bytes:
+    """The image (uint8, or float in [0, 1]) encoded as PNG; ``metadata`` (JSON-able, e.g.
+    :func:`render_record`) goes into a ``tEXt`` chunk named ``intuitf``."""
+    return _encode(image, "PNG", metadata)
+
+
+def image_format(path: str | os.PathLike) -> str:
+    """The format :func:`save_image` writes for ``path``'s suffix; ImageError for others."""
+    suffix = Path(path).suffix.lower()
+    fmt = IMAGE_FORMATS.get(suffix)
+    if fmt is None:
         raise ImageError(
-            f"{p}: cannot write the image ({exc.strerror or exc}).",
-            "Check that the folder exists and is writable, or choose another output path.",
-        ) from exc
-    return p
+            f"{path}: cannot write a picture with the suffix {suffix or '(none)'!r}.",
+            f"Use one of: {', '.join(IMAGE_FORMATS)}.",
+        )
+    return fmt
+
+
+def save_image(image: np.ndarray, path: str | os.PathLike, metadata: Mapping | None = None) -> Path:
+    """Write ``image`` as PNG or JPEG, as ``path``'s suffix says (others are refused),
+    atomically: a crash never leaves half a file at ``path``."""
+    return _write_atomic(Path(path), _encode(image, image_format(path), metadata))
+
+
+def save_png(image: np.ndarray, path: str | os.PathLike, metadata: Mapping | None = None) -> Path:
+    """Write ``image`` as a PNG atomically: a crash never leaves half a file at ``path``."""
+    return _write_atomic(Path(path), png_bytes(image, metadata))
+
+
+def read_render_metadata(source: str | os.PathLike | bytes) -> dict | None:
+    """The record a rendering written by intuitf carries (see :func:`render_record`), or None
+    when the picture has none (not written by intuitf, or re-saved by a program that drops
+    text chunks). A picture that cannot be read raises :class:`ImageError`."""
+    info = _open(source).info
+    text = info.get(METADATA_KEY)
+    if text is None:
+        comment = info.get("comment")
+        if isinstance(comment, bytes):
+            comment = comment.decode("utf-8", "replace")
+        if isinstance(comment, str) and comment.startswith(METADATA_KEY + ":"):
+            text = comment[len(METADATA_KEY) + 1 :]
+    if not isinstance(text, str):
+        return None
+    try:
+        rec = json.loads(text)
+    except ValueError:
+        return None
+    return rec if isinstance(rec, dict) and isinstance(rec.get("camera"), dict) else None
+
+
+def _write_atomic(p: Path, data: bytes) -> Path:
+    from intuitf.fileio import atomic_write_bytes
+
+    return atomic_write_bytes(p, data, error=ImageError)
 
 
 def _open(source: str | os.PathLike | bytes) -> Image.Image:

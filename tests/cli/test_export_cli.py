@@ -78,7 +78,7 @@ def test_export_default_name_and_value_range_option(tmp_path, capsys):
     [
         (["export", "{missing}", "--to", "vtk"], "no such"),
         (["export", "{bad}", "--to", "vtk"], "not valid JSON"),
-        (["export", "{good}", "--to", "blender"], "Unknown export format"),
+        (["export", "{good}", "--to", "blender"], "'blender' is not one of 'paraview', 'slicer'"),
         (["export", "{good}", "--to", "vtk", "--value-range", "5"], "two numbers"),
         (["export", "{good}", "--to", "vtk", "--value-range", "9,1"], "LO < HI"),
         (["report", "{missing}"], "not a run folder"),

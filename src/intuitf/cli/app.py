@@ -39,8 +39,33 @@ for _name in COMMAND_MODULES:
 err_console = Console(stderr=True)
 
 
+def _click_flavours() -> list:
+    """The click modules whose exceptions Typer may raise: the vendored ``typer._click`` of
+    newer Typer releases and, when installed, the stand-alone ``click`` of older ones."""
+    mods = []
+    for name in ("typer._click.exceptions", "click.exceptions"):
+        try:
+            mods.append(importlib.import_module(name))
+        except ImportError:
+            continue
+    return mods
+
+
+def _usage_exception_classes() -> tuple[tuple[type, ...], tuple[type, ...]]:
+    """(ClickException classes, Abort classes) of every click flavour present."""
+    mods = _click_flavours()
+    shown = tuple(m.ClickException for m in mods if hasattr(m, "ClickException"))
+    aborts = tuple(m.Abort for m in mods if hasattr(m, "Abort"))
+    aborts += (typer.Abort,)
+    return shown, aborts
+
+
 def main(argv: list[str] | None = None) -> None:
-    """Entry point: run the app and turn user errors into a message and exit code 2."""
+    """Entry point: run the app and turn user errors into a message and exit code 2.
+
+    Usage errors (a mistyped command or option, a value not among the choices) are shown
+    the way click shows them, whichever click Typer was built on, never as a traceback.
+    """
     try:
         rc = app(args=argv, standalone_mode=False)
         # With standalone_mode off, click returns a command's typer.Exit code instead of exiting.
@@ -58,12 +83,12 @@ def main(argv: list[str] | None = None) -> None:
     except SystemExit:
         raise
     except Exception as exc:  # click's usage errors and the like
-        import click
-
-        if isinstance(exc, click.exceptions.ClickException):
-            exc.show()
-            sys.exit(exc.exit_code)
-        if isinstance(exc, click.exceptions.Abort):
+        shown, aborts = _usage_exception_classes()
+        if isinstance(exc, shown):
+            exc.show()  # type: ignore[attr-defined]
+            code = getattr(exc, "exit_code", 2)
+            sys.exit(code if isinstance(code, int) else 2)
+        if isinstance(exc, aborts):
             err_console.print("[yellow]Aborted.[/]")
             sys.exit(130)
         raise

@@ -8,10 +8,14 @@ from pathlib import Path
 import typer
 from rich.console import Console
 
+from intuitf.cli.options import choices
 from intuitf.errors import TransferFunctionError
 from intuitf.tf.export import EXPORT_FORMATS
 
 console = Console()
+
+#: The formats ``export --to`` takes (checked by the command line, listed when wrong).
+ExportFormat = choices("ExportFormat", EXPORT_FORMATS)
 
 
 def parse_value_range(text: str | None) -> tuple[float, float] | None:
@@ -40,8 +44,12 @@ def register(app: typer.Typer) -> None:
     @app.command("export")
     def export(
         tf_file: Path = typer.Argument(..., help="Transfer function JSON written by intuitf."),
-        to: str = typer.Option(
-            ..., "--to", help=f"Target format: {', '.join(EXPORT_FORMATS)}.", show_default=False
+        to: ExportFormat = typer.Option(
+            ...,
+            "--to",
+            help="Target format.",
+            case_sensitive=False,
+            show_default=False,
         ),
         output: Path | None = typer.Option(
             None,
@@ -64,12 +72,7 @@ def register(app: typer.Typer) -> None:
         from intuitf.tf import load_tf
         from intuitf.tf.export_io import export_path, write_export
 
-        fmt = to.strip().lower()
-        if fmt not in EXPORT_FORMATS:
-            raise TransferFunctionError(
-                f"Unknown export format {to!r}.",
-                f"Use --to with one of: {', '.join(EXPORT_FORMATS)}.",
-            )
+        fmt = ExportFormat(to).value
         vr = parse_value_range(value_range)
         tf = load_tf(tf_file)
         if output is None:

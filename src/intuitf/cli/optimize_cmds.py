@@ -12,6 +12,7 @@ from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeEl
 from rich.table import Table
 
 from intuitf.cli import options as vo
+from intuitf.cli.views import default_camera, judging_view
 from intuitf.errors import IntuitfError
 from intuitf.tf import load_tf
 
@@ -131,8 +132,10 @@ def _print_summary(outcome, session, started: float) -> None:
     if outcome.run_dir is not None:
         color = "green" if outcome.completed else "yellow"
         console.print(f"[{color}]{escape(outcome.message)}[/]")
+        report = outcome.run_dir / "report.html"
         console.print(
-            f"Results: [bold]{outcome.run_dir}[/]  (report: {outcome.run_dir / 'report.html'})"
+            f"Results: [bold]{outcome.run_dir}[/]"
+            + (f"  (report: {report})" if report.exists() else "")
         )
         if not outcome.completed:
             console.print(f"Continue with: intuitf optimize --resume {outcome.run_dir}")
@@ -207,11 +210,17 @@ def register(app: typer.Typer) -> None:
             help="Seconds to get one answer, retries included (default 60, or the config).",
         ),
         seed: int = typer.Option(0, "--seed"),
-        explorer: str = typer.Option("ga", "--explorer", help="ga | cmaes | random | paper-ga"),
-        protocol: str = typer.Option(
-            "efficient", "--protocol", help="efficient | paper (tournament)"
+        explorer: vo.Explorer = typer.Option(
+            "ga", "--explorer", case_sensitive=False, help="Search method."
         ),
-        size: int = typer.Option(256, "--size", help="Image size for judging."),
+        protocol: vo.Protocol = typer.Option(
+            "efficient", "--protocol", case_sensitive=False, help="Tournament protocol."
+        ),
+        size: int = typer.Option(
+            None,
+            "--size",
+            help="Image size for judging (default 256, or the size of the --on picture).",
+        ),
         output_size: int = typer.Option(
             512, "--output-size", help="Image size of the best renderings."
         ),
@@ -235,8 +244,12 @@ def register(app: typer.Typer) -> None:
             help="Seed the first population, and steer colour and opacity mutations, from the "
             "materials --text names (e.g. 'opaque ivory bone': ivory, opaque, on the bone).",
         ),
-        azimuth: float = typer.Option(None, "--azimuth"),
-        elevation: float = typer.Option(None, "--elevation"),
+        azimuth: float = typer.Option(
+            None, "--azimuth", help="Judging view (default 30, or the --on picture's camera)."
+        ),
+        elevation: float = typer.Option(
+            None, "--elevation", help="Judging view (default 20, or the --on picture's camera)."
+        ),
         refine: Path = typer.Option(
             None,
             "--refine",
@@ -294,10 +307,13 @@ def register(app: typer.Typer) -> None:
             select_device(device)  # a missing GPU is reported before any work
             volume_spec = {"source": volume, **vo.volume_kwargs(shape, dtype, byte_order,
                                                                 spacing, max_dim)}  # fmt: skip
+            view = judging_view(sketch, on, azimuth, elevation, size, _volume_name(volume))
+            for note in view.notes:
+                console.print(f"[yellow]note:[/] {escape(note)}")
             settings = dict(
                 population=population, generations=generations, n_gaussians=gaussians, seed=seed,
-                explorer=explorer, protocol=protocol, image_size=size, output_size=output_size,
-                top_k=top, shading=shading, camera=_camera_dict(azimuth, elevation),
+                explorer=str(explorer), protocol=str(protocol), image_size=view.size,
+                output_size=output_size, top_k=top, shading=shading, camera=view.camera,
                 palette_hint=palette, material_hints=hints, device=device,
             )  # fmt: skip
             intent = _intent_spec(text, image, sketch, on, about)
@@ -352,28 +368,15 @@ def register(app: typer.Typer) -> None:
             "intent": {"kind": "text", "text": DEMO_TEXT, "about": DEMO_ABOUT},
             "judge": "metric",
             "settings": dict(population=population, generations=generations, seed=0,
-                             image_size=160, output_size=384, top_k=4),
+                             image_size=160, output_size=384, top_k=4, camera=default_camera()),
         }  # fmt: skip
         session = Session.open(spec, output, overwrite=True, volume=vol)
         outcome = _run_with_progress(session)
         _print_summary(outcome, session, started)
-        if outcome.run_dir is not None:
+        if outcome.run_dir is not None and (outcome.run_dir / "report.html").exists():
             console.print(
                 f"Open {outcome.run_dir / 'report.html'} in a browser to see the results."
             )
-
-
-def _camera_dict(azimuth, elevation) -> dict:
-    d = {}
-    if azimuth is not None:
-        d["azimuth"] = azimuth
-    if elevation is not None:
-        d["elevation"] = elevation
-    if not d:
-        return {}
-    from intuitf.render import Camera
-
-    return Camera(**d).to_dict()
 
 
 def _volume_name(source: str) -> str:

@@ -25,14 +25,62 @@ traceback (exit code 2).
 from __future__ import annotations
 
 import re
-from typing import Annotated, Any
+from collections.abc import Iterable
+from enum import StrEnum
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
 from intuitf.errors import VolumeError
-from intuitf.volume import Volume, load_volume
+
+if TYPE_CHECKING:
+    from intuitf.volume import Volume
 
 _PANEL = "Volume options"
+
+#: The view every command uses unless told otherwise (render, optimize): a three-quarter view
+#: from the front, a little from above. A sketch drawn on an ``intuitf render`` picture is
+#: judged from the camera recorded in that picture, whatever these say.
+DEFAULT_AZIMUTH = 30.0
+DEFAULT_ELEVATION = 20.0
+
+
+def choices(name: str, values: Iterable[str]) -> type[StrEnum]:
+    """A string Enum of ``values`` for a choice-valued option.
+
+    Typer checks the option against it before the command runs and, for any other value,
+    prints a usage error that lists the valid ones (exit code 2). The command receives a
+    member, which is a ``str`` equal to its value.
+    """
+    return StrEnum(name, [(re.sub(r"\W", "_", v).upper() or "_", v) for v in values])
+
+
+#: Voxel types of raw files, by their canonical names.
+Dtype = choices(
+    "Dtype",
+    ("uint8", "int8", "uint16", "int16", "uint32", "int32", "uint64", "int64", "float16",
+     "float32", "float64"),
+)  # fmt: skip
+ByteOrder = choices("ByteOrder", ("little", "big"))
+
+
+def _explorer_methods() -> tuple[str, ...]:
+    from intuitf.explorer.methods import METHODS
+
+    return tuple(METHODS)
+
+
+def _protocols() -> tuple[str, ...]:
+    from typing import get_args
+
+    from intuitf.evaluator.tournament import Protocol
+
+    return get_args(Protocol)
+
+
+#: ``optimize --explorer``: the search methods; ``--protocol``: the tournament protocols.
+Explorer = choices("Explorer", _explorer_methods())
+Protocol = choices("Protocol", _protocols())
 
 VolumeArg = Annotated[
     str,
@@ -53,18 +101,20 @@ ShapeOpt = Annotated[
     ),
 ]
 DtypeOpt = Annotated[
-    str | None,
+    Dtype | None,
     typer.Option(
         "--dtype",
-        help="Voxel type of a raw file: uint8, int8, uint16, int16, uint32, int32, float32, float64.",
+        help="Voxel type of a raw file (default: from its name or its JSON sidecar).",
+        case_sensitive=False,
         rich_help_panel=_PANEL,
     ),
 ]
 ByteOrderOpt = Annotated[
-    str | None,
+    ByteOrder | None,
     typer.Option(
         "--byte-order",
-        help="Byte order of a raw file: little (default) or big.",
+        help="Byte order of a raw file (default: little, or its sidecar's).",
+        case_sensitive=False,
         rich_help_panel=_PANEL,
     ),
 ]
@@ -120,7 +170,7 @@ def volume_kwargs(
     max_dim: int | None = None,
 ) -> dict[str, Any]:
     """Turn the option values into keyword arguments for :func:`intuitf.volume.load_volume`."""
-    if byte_order is not None and byte_order.strip().lower() not in ("little", "big"):
+    if byte_order is not None and str(byte_order).strip().lower() not in ("little", "big"):
         raise VolumeError(
             f"--byte-order must be 'little' or 'big', got {byte_order!r}.",
             "Use --byte-order little or --byte-order big.",
@@ -131,8 +181,8 @@ def volume_kwargs(
         )
     kw: dict[str, Any] = {
         "shape": parse_triple(shape, "shape", int),
-        "dtype": dtype,
-        "byte_order": byte_order.strip().lower() if byte_order else None,
+        "dtype": str(dtype.value if isinstance(dtype, StrEnum) else dtype) if dtype else None,
+        "byte_order": str(byte_order).strip().lower() if byte_order else None,
         "spacing": parse_triple(spacing, "spacing", float),
         "max_dim": max_dim,
     }
@@ -148,4 +198,6 @@ def open_volume(
     max_dim: int | None = None,
 ) -> Volume:
     """Read ``volume`` (a path, or ``phantom`` / ``builtin:phantom``) with the CLI options."""
+    from intuitf.volume import load_volume
+
     return load_volume(volume, **volume_kwargs(shape, dtype, byte_order, spacing, max_dim))

@@ -59,7 +59,14 @@ def parse_size(text: str) -> int | tuple[int, int]:
 def render_command(
     volume: vo.VolumeArg,
     output: Annotated[
-        Path, typer.Option("--output", "-o", help="PNG file to write.", show_default=False)
+        Path,
+        typer.Option(
+            "--output",
+            "-o",
+            help="Picture to write: .png, or .jpg/.jpeg. The PNG records the camera, size and "
+            "volume (for sketching on it).",
+            show_default=False,
+        ),
     ],
     tf_path: Annotated[
         Path | None,
@@ -72,10 +79,10 @@ def render_command(
     azimuth: Annotated[
         float,
         typer.Option(help="Turn about the vertical (z) axis, degrees.", rich_help_panel=_VIEW),
-    ] = 30.0,
+    ] = vo.DEFAULT_AZIMUTH,
     elevation: Annotated[
         float, typer.Option(help="Raise the camera towards +z, degrees.", rich_help_panel=_VIEW)
-    ] = 20.0,
+    ] = vo.DEFAULT_ELEVATION,
     roll: Annotated[
         float, typer.Option(help="Turn the picture clockwise, degrees.", rich_help_panel=_VIEW)
     ] = 0.0,
@@ -119,17 +126,18 @@ def render_command(
     spacing: vo.SpacingOpt = None,
     max_dim: vo.MaxDimOpt = None,
 ) -> None:
-    """Render VOLUME with a transfer function and write a PNG.
+    """Render VOLUME with a transfer function and write a PNG (or JPEG).
 
     The camera orbits the volume's centre: azimuth 0 / elevation 0 looks from -y towards +y
     with +z up; zoom 1 fits the whole volume.
     """
-    from intuitf.imageio import save_png
+    from intuitf.imageio import image_format, render_record, save_image
     from intuitf.render import Camera, VolumeRenderer
     from intuitf.render.device import select_device
     from intuitf.tf import default_tf, load_tf
 
     console = Console(stderr=True)
+    image_format(output)  # an unknown suffix is refused before any work
     bg = parse_color(background)
     picture = parse_size(size)
     device = select_device(device)  # a missing GPU is reported before any work
@@ -158,7 +166,14 @@ def render_command(
     t = time.perf_counter()
     image = renderer.render(tf, camera)
     took = time.perf_counter() - t
-    path = save_png(image, output)
+    record = render_record(
+        camera,
+        (renderer.width, renderer.height),
+        vol.name,
+        shading=shading,
+        background=list(bg),
+    )
+    path = save_image(image, output, metadata=record)
     console.print(
         f"Wrote {path} ({renderer.width}×{renderer.height}, {len(tf)} Gaussians, "
         f"{took * 1000:.0f} ms).",

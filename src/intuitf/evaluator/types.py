@@ -89,6 +89,67 @@ class Intent:
             h.update(np.packbits(m).tobytes())
         return h.hexdigest()
 
+    def validate(self) -> None:
+        """Raise :class:`~intuitf.errors.IntuitfError` unless every judge can use this intent.
+
+        Called before a run starts, so that a problem with the user's pictures (a sketch not
+        the size of the picture it was drawn on, a sketch with no strokes, a missing picture)
+        is reported at once, not by a model judge halfway through a paid run.
+        """
+        from intuitf.errors import IntuitfError
+
+        def size(a: np.ndarray) -> str:
+            return f"{a.shape[1]}x{a.shape[0]}"
+
+        def picture(a, what: str, channels: int) -> None:
+            if a is None:
+                raise IntuitfError(f"A {self.kind!r} intent needs {what}.")
+            if (
+                not isinstance(a, np.ndarray)
+                or a.ndim != 3
+                or a.shape[2] != channels
+                or min(a.shape[:2]) < 1
+            ):
+                shape = getattr(a, "shape", None)
+                raise IntuitfError(
+                    f"The {what} must be a picture with {channels} channels, got shape {shape}."
+                )
+
+        if self.kind not in ("none", "text", "image", "sketch", "edit"):
+            raise IntuitfError(
+                f"Unknown intent kind {self.kind!r}.", "Use none, text, image, sketch or edit."
+            )
+        if self.kind == "text" and not (self.text and self.text.strip()):
+            raise IntuitfError("A text intent needs some text.", 'Say what you want: --text "..."')
+        if self.kind == "image":
+            picture(self.reference, "reference picture", 3)
+        if self.kind == "sketch":
+            picture(self.sketch, "sketch (an RGBA stroke layer)", 4)
+            picture(self.base, "picture the sketch was drawn on", 3)
+            if self.sketch.shape[:2] != self.base.shape[:2]:
+                raise IntuitfError(
+                    f"The sketch is {size(self.sketch)} pixels but the picture it was drawn on "
+                    f"is {size(self.base)}: the strokes cannot be placed on it.",
+                    "Draw the strokes on a transparent layer of exactly the base picture's size "
+                    "(and pass that picture with --on).",
+                )
+            if not np.any(self.sketch[..., 3] > 0):
+                raise IntuitfError(
+                    "The sketch has no strokes: every pixel of it is transparent.",
+                    "Paint coloured strokes on the layer where you want those colours.",
+                )
+        if self.kind == "edit":
+            if not (self.text and self.text.strip()) or not self.selected:
+                raise IntuitfError("An edit intent needs an instruction and selected Gaussians.")
+            if self.base is not None:
+                picture(self.base, "picture before the edit", 3)
+        if self.selection_mask is not None and self.base is not None:
+            if np.shape(self.selection_mask)[:2] != self.base.shape[:2]:
+                raise IntuitfError(
+                    f"The selection mask is {np.shape(self.selection_mask)[:2]} but the picture "
+                    f"before the edit is {self.base.shape[:2]}."
+                )
+
 
 @dataclass
 class Cost:

@@ -33,7 +33,7 @@ def evolution_records(generations: list[dict]) -> list[dict]:
 
 def write_run_outputs(session: Session) -> None:
     """Write best/, evolution.png and report.html into the session's run folder."""
-    from intuitf.imageio import png_bytes
+    from intuitf.imageio import png_bytes, render_record
     from intuitf.plots import evolution_plot, tf_plot
     from intuitf.report import build_report
     from intuitf.tf.export import EXPORT_FORMATS, export_tf
@@ -48,7 +48,9 @@ def write_run_outputs(session: Session) -> None:
         tf = replace(tf.unfreeze(), value_range=session.volume.value_range, name=f"rank{rank:02d}")
         stem = rd.best_dir / f"rank{rank:02d}"
         image = session.render(tf)
-        atomic_write_bytes(stem.with_suffix(".png"), png_bytes(image))
+        record = render_record(session.camera, (image.shape[1], image.shape[0]),
+                               session.volume.name, shading=session.settings.shading)  # fmt: skip
+        atomic_write_bytes(stem.with_suffix(".png"), png_bytes(image, record))
         atomic_write_bytes(stem.with_name(stem.name + ".tf.json"), tf.to_json().encode())
         atomic_write_bytes(stem.with_name(stem.name + ".tf.png"), tf_plot(tf, counts))
         for fmt, suffix in EXPORT_FORMATS.items():

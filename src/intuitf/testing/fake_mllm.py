@@ -549,6 +549,17 @@ def main(argv: list[str] | None = None) -> None:
             faults[kind] = float(rate)
         except ValueError:
             parser.error(f"--fault-rate {item!r}: RATE must be a number")
+        if not 0.0 <= faults[kind] <= 1.0:
+            parser.error(f"--fault-rate {item!r}: RATE must be within 0..1")
+    if sum(faults.values()) > 1.0 + 1e-9:
+        given = ", ".join(f"{k}={v:g}" for k, v in faults.items())
+        parser.error(
+            f"--fault-rate values add up to {sum(faults.values()):g} ({given}); each request "
+            "gets at most one fault, so together they must be at most 1"
+        )
+    for flag, value in (("--noise", args.noise), ("--position-bias", args.position_bias)):
+        if not 0.0 <= value <= 1.0:
+            parser.error(f"{flag} is a probability within 0..1, got {value:g}")
     if args.target:
         try:
             with Image.open(args.target) as im:

@@ -15,6 +15,8 @@ Conventions, the same for every format:
   data ``lut_size`` is one entry per integer value in that range (at most 4096).
 * **User overrides.** ``spacing`` replaces the file's spacing. ``shape``, ``dtype`` and
   ``byte_order`` describe headerless files (raw); formats with a header ignore them (noted).
+  A raw file's sidecar (``NAME.json`` or a detached ``.nhdr`` header pointing at it) gives
+  what the options do not; see :mod:`intuitf.volume.readers.sidecar`.
 * **Downsampling.** ``max_dim`` shrinks volumes whose largest axis exceeds it (anti-aliased,
   extent kept, spacing adjusted) and says so in ``notes``. The value range stays that of the
   full-resolution data.
@@ -157,7 +159,7 @@ def load_volume(
         ]
         if ignored:
             notes.append(f"Ignored {', '.join(ignored)}: the file's header describes it.")
-    return _finish(got, req, notes, name or got.name or _default_name(p))
+    return _finish(got, req, notes, name or got.name or _default_name(p), raw_opts)
 
 
 def _check_path(p: Path) -> None:
@@ -204,7 +206,26 @@ def _default_name(p: Path) -> str:
     return strip_suffixes(n) or n
 
 
-def _finish(got: RawArray, req: ReadRequest, notes: list[str], name: str) -> Volume:
+def _no_spacing_note(path: Path, shape_zyx: tuple[int, ...], raw: bool) -> str:
+    """The note for a file without voxel spacing: what follows, and exactly what fixes it."""
+    z, y, x = shape_zyx
+    where = ""
+    if raw:
+        from intuitf.volume.readers.sidecar import json_sidecar_names
+
+        car = json_sidecar_names(path)[-1].name
+        where = f', or put a sidecar {car} next to the file holding {{"spacing": [X, Y, Z]}}'
+    return (
+        f"The file gives no voxel spacing, so its {x}x{y}x{z} voxels are drawn as cubes "
+        "(1,1,1): the picture is stretched or squashed unless they are. Give the voxel size "
+        "along x, y, z with --spacing X,Y,Z (e.g. --spacing 0.5,0.5,1.0 for voxels twice as "
+        f"deep as they are wide){where}."
+    )
+
+
+def _finish(
+    got: RawArray, req: ReadRequest, notes: list[str], name: str, raw: bool = False
+) -> Volume:
     a = got.array
     if a.ndim != 3:
         raise VolumeError(
@@ -220,7 +241,7 @@ def _finish(got: RawArray, req: ReadRequest, notes: list[str], name: str) -> Vol
         )
     spacing = req.spacing or got.spacing or (1.0, 1.0, 1.0)
     if req.spacing is None and got.spacing is None:
-        notes.append("The file gives no voxel spacing; using 1,1,1 (pass --spacing X,Y,Z).")
+        notes.append(_no_spacing_note(req.path, a.shape, raw))
     spacing = tuple(float(s) for s in spacing)
     if len(spacing) != 3 or not all(np.isfinite(s) and s > 0 for s in spacing):
         raise VolumeError(

@@ -5,6 +5,10 @@ The grid size and sample type come from the caller or from the file name, in the
 ``foot_zfp8lossy_256x256x256_uint8.raw.gz``). Voxels are stored with x varying fastest, then y,
 then z, so the array comes out as ``[z, y, x]``. Byte order is little-endian unless told.
 Uncompressed files are memory-mapped, so downsampling a huge file reads it in slabs.
+
+A raw file carries no voxel spacing. A sidecar next to it may give it, and the grid size, type
+and byte order too: ``NAME.json`` (or ``NAME.raw.json``) or a detached NRRD header ``*.nhdr``
+whose ``data file`` is this file (see :mod:`intuitf.volume.readers.sidecar`).
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from intuitf.errors import VolumeError
+from intuitf.volume.readers.sidecar import find_sidecar, json_sidecar_names
 from intuitf.volume.request import RawArray, ReadRequest
 
 #: Accepted sample-type names and the numpy kinds they mean (byte order added later).
@@ -174,16 +179,47 @@ def read(request: ReadRequest) -> RawArray:
     """Read a ``.raw`` or ``.raw.gz`` file."""
     path = request.path
     name_dims, name_dtype, name = parse_name(path.name)
-    dims = request.shape or name_dims
-    dtype_text = request.dtype or name_dtype
+    car = find_sidecar(path)
+    notes: list[str] = []
+    spacing = None
+    if car is not None:
+        notes += car.notes
+        told = [
+            f"{what} {text}"
+            for what, value, text, overridden in (
+                ("shape", car.shape, "x".join(map(str, car.shape or ())), request.shape),
+                ("voxel type", car.dtype, car.dtype, request.dtype),
+                ("byte order", car.byte_order, car.byte_order, request.byte_order),
+                (
+                    "spacing",
+                    car.spacing,
+                    ",".join(f"{v:g}" for v in car.spacing or ()),
+                    request.spacing,
+                ),
+            )  # fmt: skip
+            if value is not None and overridden is None
+        ]
+        if told:
+            notes.append(f"From {car.path.name}: {', '.join(told)}.")
+        if car.shape and name_dims and tuple(car.shape) != tuple(name_dims) and not request.shape:
+            notes.append(
+                f"{car.path.name} gives the shape {'x'.join(map(str, car.shape))}, the file's "
+                f"name {'x'.join(map(str, name_dims))}; the sidecar's is used."
+            )
+        spacing = car.spacing
+    dims = request.shape or (car.shape if car else None) or name_dims
+    dtype_text = request.dtype or (car.dtype if car else None) or name_dtype
+    byte_order = request.byte_order or (car.byte_order if car else None)
     if dims is None or dtype_text is None:
         missing = " and ".join(
             w for w, v in (("grid size", dims), ("voxel type", dtype_text)) if v is None
         )
         raise VolumeError(
             f"{path}: a raw file has no header, and its {missing} could not be read from its name.",
-            "Pass --shape X,Y,Z and --dtype (e.g. --shape 256,256,128 --dtype uint8), or name "
-            "the file like volume_256x256x128_uint8.raw.",
+            "Pass --shape X,Y,Z and --dtype (e.g. --shape 256,256,128 --dtype uint8), name "
+            "the file like volume_256x256x128_uint8.raw, or put a sidecar "
+            f"{json_sidecar_names(path)[-1].name} next to it holding "
+            '{"shape": [256, 256, 128], "dtype": "uint8", "spacing": [1, 1, 1]}.',
         )
     dims = tuple(int(d) for d in dims)
     if len(dims) != 3 or min(dims) < 1:
@@ -191,7 +227,7 @@ def read(request: ReadRequest) -> RawArray:
             f"{path}: the grid size must be three positive numbers, got {dims}.",
             "Pass --shape X,Y,Z.",
         )
-    dtype = parse_dtype(dtype_text, request.byte_order, source=str(path))
+    dtype = parse_dtype(dtype_text, byte_order, source=str(car.path if car else path))
     x, y, z = dims
     expected = x * y * z * dtype.itemsize
     compressed = path.name.lower().endswith(".gz")
@@ -201,7 +237,7 @@ def read(request: ReadRequest) -> RawArray:
             raise _size_mismatch(path, expected, actual, dims, dtype, compressed=False)
         request.reserve(dims, dtype, mapped=True)
         arr = np.memmap(path, dtype=dtype, mode="r", shape=(z, y, x))
-        return RawArray(arr, spacing=None, name=name)
+        return RawArray(arr, spacing=spacing, notes=notes, name=name)
 
     isize = _gzip_isize(path)
     if isize is None or isize != expected % (1 << 32):
@@ -229,4 +265,4 @@ def read(request: ReadRequest) -> RawArray:
         raise _cut_off(path, got, expected, dims, dtype, exc) from None
     if got != expected or extra:
         raise _size_mismatch(path, expected, got + extra, dims, dtype, compressed=True)
-    return RawArray(arr, spacing=None, name=name)
+    return RawArray(arr, spacing=spacing, notes=notes, name=name)
