@@ -1,0 +1,23 @@
+"""Pictures whose order a fake judge knows in advance, for tests of judges and servers."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def oracle_images(seed: int = 7, size: int = 48) -> tuple[np.ndarray, list[np.ndarray]]:
+    """A random target picture and eight candidates at rising distance from it.
+
+    Candidate ``k`` is the target blended ``0.08 (k + 1)`` of the way to its negative, so it
+    differs by about ``20 k`` grey levels: an oracle prefers ``candidates[i]`` to
+    ``candidates[j]`` whenever ``i < j``.
+    """
+    rng = np.random.default_rng(seed)
+    target = rng.integers(0, 256, (size, size, 3), dtype=np.uint8)
+    inverted = 255.0 - target.astype(np.float64)
+    candidates = []
+    for k in range(8):
+        t = 0.08 * (k + 1)
+        img = (1 - t) * target + t * inverted
+        candidates.append(np.clip(img + 0.5, 0, 255).astype(np.uint8))
+    return target, candidates
