@@ -60,6 +60,8 @@ def test_sketch_is_judged_from_its_base_pictures_camera(tmp_path, base):
     # The run's own pictures carry their camera too, so they can be sketched on in turn.
     best = read_render_metadata(run / "best" / "rank01.png")
     assert best["camera"] == picture["camera"] and best["volume"] == "phantom"
+    gen_best = read_render_metadata(run / "generations" / "gen000-best.png")
+    assert gen_best["camera"] == picture["camera"] and gen_best["size"] == [48, 48]
 
 
 def test_default_cameras_of_render_and_optimize_agree(tmp_path):

@@ -697,7 +697,7 @@ class Session(SessionOpening, SessionInteraction):
     def _write_generation_pictures(self, g: int, candidates, ranking: list[str]) -> None:
         if self.run_dir is None:
             return
-        from intuitf.imageio import png_bytes
+        from intuitf.imageio import png_bytes, render_record
         from intuitf.plots import contact_sheet
         from intuitf.session.rundir import atomic_write_bytes
 
@@ -709,7 +709,11 @@ class Session(SessionOpening, SessionInteraction):
         atomic_write_bytes(self.run_dir.generations_dir / f"gen{g:03d}.png", png_bytes(sheet))
         # The generation's best, small, for the history view.
         best = self._images[ordered[0].id]
-        atomic_write_bytes(self.run_dir.generations_dir / f"gen{g:03d}-best.png", png_bytes(best))
+        record = render_record(self.camera, (best.shape[1], best.shape[0]), self.volume.name,
+                               shading=self.settings.shading)  # fmt: skip
+        atomic_write_bytes(
+            self.run_dir.generations_dir / f"gen{g:03d}-best.png", png_bytes(best, record)
+        )
 
 
 # -- helpers --------------------------------------------------------------------------------
