@@ -179,3 +179,13 @@ def test_render_of_extreme_volume_is_not_black(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert np.asarray(Image.open(out)).max() > 40
     assert "beyond" in proc.stderr
+
+
+def test_optimize_on_extreme_volume_finishes(tmp_path):
+    p = tmp_path / "ext.npy"
+    np.save(p, _extreme())
+    run = tmp_path / "run"
+    proc = _intuitf("optimize", str(p), "--population", "4", "--generations", "1",
+                    "--size", "32", "--output-size", "32", "--top", "1", "-o", str(run))  # fmt: skip
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert (run / "best" / "rank01.tf.png").exists()  # the TF plot, which used to crash
