@@ -91,3 +91,13 @@ def test_text_alignment_counts_haze_against_a_rendering(volume):
         MetricJudge().compare(clean, haze, aspects_for("text"), Intent(kind="text", text=text))
     )
     assert v.overall is Choice.FIRST, v.rationale
+
+
+def test_a_painted_box_is_seen():
+    """Painting the background's values fills the volume's box: its straight outline shows."""
+    for p, a, b in _pairs():
+        if p["kind"] != "haze":
+            continue
+        clean, haze = (a, b) if p["better"] == "first" else (b, a)
+        assert quality(haze).box, p
+        assert not quality(clean).box, p

@@ -445,7 +445,10 @@ class _Layout:
         return max(0.008, min((self.first_real - b) / 3.0, (b - self.background) / 4.0))
 
     def _peaks_above(self, value: float, gap: float) -> list[int]:
-        return [i for i, s in enumerate(self.slots) if s[0] > value + gap]
+        """Materials above ``value + gap``: the histogram's peaks there, else its quantiles."""
+        above = [i for i, s in enumerate(self.slots) if s[0] > value + gap]
+        peaks = [i for i in above if self.slots[i][2] > 0.0]
+        return peaks or above
 
     def place(self, role: str) -> tuple[float, float]:
         s, main = self.slots, self.main

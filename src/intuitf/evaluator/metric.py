@@ -21,7 +21,7 @@ aspect key                     measure (higher is better unless noted)
 ``feature_discrimination``     colour separation of the clearly shown materials (CIELAB a*b*
                                spread) plus crispness of their boundaries, times clarity
 ``color_content_harmony``      not judged (tie): harmony is taste, not a statistic
-``text_alignment``             (times 0.5 + 0.5 clarity: haze and speckle count against a
+``text_alignment``             (times 0.3 + 0.7 clarity: haze and speckle count against a
                                rendering whatever it shows) only what a text says checkably:
                                named colours ("red", "ivory",
                                "bone white", ...) must cover part of the foreground (share of
@@ -38,12 +38,15 @@ aspect key                     measure (higher is better unless noted)
 ``stroke_color_agreement``     minus the mean CIE76 ΔE between the rendering and the stroke
                                colours where the sketch's alpha > 0
 ``unmarked_preservation``      minus the mean ΔE to the base rendering where alpha == 0
-``edit_instruction_alignment`` named colours of the instruction inside the region (the alpha
-                               of ``intent.sketch`` when given, else the whole image); with no
-                               named colour, the amount of change from the base in the region
-                               (only with a region; otherwise a tie)
-``structure_preservation``     minus the mean ΔE to the base outside the region (everywhere
-                               when no region is given)
+``edit_instruction_alignment`` in the region (``intent.selection_mask``: the pixels the
+                               selected features cover in the base; else the sketch's alpha;
+                               else the whole image): closeness of its pixels to the colour
+                               the instruction names, and its opacity moved the way the
+                               words say ("more transparent", "opaque", "hide") compared with
+                               the base; with neither, the amount of change from the base
+                               there (only with a region; otherwise a tie)
+``structure_preservation``     minus the mean ΔE to the base outside the region (the
+                               selection grown by 2 px; everywhere when no region is given)
 =============================  ===========================================================
 
 Aspect keys it does not know are matched by keyword ("richness", "discrimination", "contrast",
@@ -66,6 +69,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 from skimage.color import rgb2lab
 from skimage.metrics import structural_similarity
 from skimage.transform import resize
@@ -385,7 +389,7 @@ class MetricJudge:
             return None
         # "Judged together with its visual quality": a veil or speckle counts against a
         # rendering however well its colours match the words.
-        return float(np.mean(parts)) * (0.5 + 0.5 * f.quality.clarity)
+        return float(np.mean(parts)) * (0.3 + 0.7 * f.quality.clarity)
 
     def _ref_colour(self, f: _Features, intent: Intent) -> float | None:
         if intent.reference is None:
@@ -410,21 +414,48 @@ class MetricJudge:
         if intent.base is None:
             return None
         base = self._base_lab(intent, f.lab.shape[:2])
-        mask, _ = _strokes(intent, f.lab.shape[:2])
+        mask = _edit_region(intent, f.lab.shape[:2])
+        if mask is not None and intent.selection_mask is not None:
+            # The selected features' own rim changes with them: judge what lies beyond it.
+            mask = ndimage.binary_dilation(mask, iterations=2)
         keep = np.ones(f.lab.shape[:2], bool) if mask is None else ~mask
         if not keep.any():
             return None
         return -float(np.linalg.norm(f.lab[keep] - base[keep], axis=1).mean())
 
     def _edit_change(self, f: _Features, intent: Intent) -> float | None:
-        mask, _ = _strokes(intent, f.lab.shape[:2])
+        """How far the requested change happened in the region (the selection, or strokes).
+
+        A named colour: how close the region's pixels come to it (lightness, which shading
+        varies, counts a third), 1 for all of them on it. An opacity word ("more
+        transparent", "fainter", "opaque", "hide"): how much the region moved toward or away
+        from the background compared with the base. Both: their mean. Neither: how much the
+        region changed at all (a region is needed; "change something somewhere" is not
+        checkable).
+        """
+        mask = _edit_region(intent, f.lab.shape[:2])
+        if mask is not None and not mask.any():
+            mask = None
         region = np.ones(f.lab.shape[:2], bool) if mask is None else mask
-        names = named_colours(intent.text or "")
+        text = intent.text or ""
+        names = named_colours(text)
+        base = self._base_lab(intent, f.lab.shape[:2]) if intent.base is not None else None
+        parts = []
         if names:
-            return _colour_presence(f, names, region & f.fg if (region & f.fg).any() else region)
-        if mask is None or intent.base is None or not mask.any():
-            return None  # "change something somewhere" is not checkable
-        base = self._base_lab(intent, f.lab.shape[:2])
+            if mask is None:
+                shown = region & f.fg if (region & f.fg).any() else region
+                parts.append(_colour_presence(f, names, shown))
+            else:
+                parts.append(_colour_closeness(f.lab[region], names[0]))
+        direction = _opacity_direction(text)
+        if direction and base is not None:
+            now = np.linalg.norm(f.lab[region] - f.bg_lab, axis=1).mean()
+            before = np.linalg.norm(base[region] - f.bg_lab, axis=1).mean()
+            parts.append(0.5 + 0.5 * float(np.tanh(direction * (now - before) / 20.0)))
+        if parts:
+            return float(np.mean(parts))
+        if mask is None or base is None:
+            return None
         return float(np.linalg.norm(f.lab[mask] - base[mask], axis=1).mean()) / 100.0
 
     def _base_lab(self, intent: Intent, shape: tuple[int, int]) -> np.ndarray:
@@ -526,6 +557,52 @@ def _colour_presence(f: _Features, names: Sequence[str], region: np.ndarray) -> 
         near = np.linalg.norm(pix - t, axis=1) < _NAMED_DELTA_E
         shares.append(min(1.0, near.mean() / _NAMED_SATURATION))
     return float(np.mean(shares))
+
+
+def _edit_region(intent: Intent, shape: tuple[int, int]) -> np.ndarray | None:
+    """Where an edit should happen: the selected features' pixels, else the sketch strokes."""
+    if intent.selection_mask is not None:
+        m = np.asarray(intent.selection_mask).astype(np.float32)
+        return _resize_like(m, shape, order=0) > 0.5
+    mask, _ = _strokes(intent, shape)
+    return mask
+
+
+_MORE_OPAQUE_RE = re.compile(
+    r"\b(more (opaque|solid|visible|prominent)|less (transparent|translucent|faint)|"
+    r"(make|made) (it |them )?(opaque|solid|visible)|opaque|solid|stronger|thicker|denser)\b"
+)
+_LESS_OPAQUE_RE = re.compile(
+    r"\b(more (transparent|translucent|faint|subtle)|less (opaque|solid|visible|prominent)|"
+    r"transparent|translucent|faint(er)?|fade\w*|subtle|thinner|weaker|hide|hidden|remove|"
+    r"invisible|see[- ]through)\b"
+)
+
+
+def _opacity_direction(text: str) -> int:
+    """+1 if an edit asks for more opacity, -1 for less, 0 if it says neither."""
+    t = text.lower()
+    if _LESS_OPAQUE_RE.search(t):
+        return -1
+    if _MORE_OPAQUE_RE.search(t.replace("semi", "")):
+        return 1
+    return 0
+
+
+def _colour_closeness(pix: np.ndarray, name: str) -> float:
+    """Mean closeness (1 on the colour, falling with distance) of Lab pixels to colour ``name``.
+
+    Lightness differences count a third: shading changes lightness across a surface of one
+    colour. The scale (a distance of 25 gives 0.37) keeps far colours apart too, so each step
+    toward the colour scores.
+    """
+    if pix.shape[0] == 0:
+        return 0.0
+    t = _named_lab([name])[0]
+    d = np.sqrt(
+        (0.33 * (pix[:, 0] - t[0])) ** 2 + (pix[:, 1] - t[1]) ** 2 + (pix[:, 2] - t[2]) ** 2
+    )
+    return float(np.exp(-d / 25.0).mean())
 
 
 def _strokes(intent: Intent, shape: tuple[int, int]) -> tuple[np.ndarray | None, np.ndarray]:

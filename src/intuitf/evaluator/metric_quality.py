@@ -12,6 +12,9 @@ image, so that renderings of any size compare alike):
   that carries a colour (a translucent red skin) is not veil, unless it is barely seen
   (within ΔE 8 of the background: a tinted murk over the box). Up to a tenth of the
   foreground is tolerated; beyond that the clarity falls with the square of the excess.
+- **box**: when the silhouette is the volume's box (a convex polygon of a few straight
+  sides, :func:`box_silhouette`), the background's own values are painted: every nearly
+  colourless foreground pixel counts as veil however bright, and the clarity is halved.
 - **grain** (noise): the ratio of fine-scale lightness energy (the image minus its
   σ = 0.8 px blur) to medium-scale energy (σ = 0.8 minus σ = 2.5 px); edges of real
   structures carry energy at both scales, speckle only at the fine one. Grain above 0.5
@@ -22,7 +25,8 @@ image, so that renderings of any size compare alike):
 - **crispness**: the 90th percentile of the lightness gradient (σ = 1 px) in the clearly
   shown pixels, /10: boundaries that are sharp rather than smeared.
 
-``clarity = (1 - max(0, veil - 0.1) / 0.9)² · exp(-2 · max(0, grain - 0.5))``, in [0, 1].
+``clarity = (1 - max(0, veil - 0.1) / 0.9)² · exp(-2 · max(0, grain - 0.5)) · (0.5 if box)``,
+in [0, 1].
 Information richness is ``entropy of the clear pixels' colours · sqrt(their coverage) ·
 clarity · (0.4 + 0.6 · min(1, separation / 25))``; feature discrimination is
 ``(min(1.5, separation / 20) + 0.3 · min(1, crispness)) · clarity``. A blank picture scores 0
@@ -43,6 +47,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 from skimage.color import rgb2lab
+from skimage.measure import approximate_polygon, find_contours
+from skimage.morphology import convex_hull_image
 from skimage.transform import resize
 
 #: Side of the square copy the quality measures are taken on.
@@ -52,6 +58,13 @@ VEIL_DELTA_E = 40.0
 VEIL_SATURATION = 0.25
 #: Foreground pixels this close to the background are veil whatever their colour (barely seen).
 VEIL_DIM = 8.0
+#: A silhouette that fills this much of its convex hull, with an outline of at most this many
+#: straight sides (2 px tolerance) and at least this share of the picture, is the volume's box.
+BOX_SOLIDITY = 0.95
+BOX_SIDES = 9
+BOX_AREA = 0.1
+#: Clarity kept when the box shows (the background itself is painted).
+BOX_PENALTY = 0.5
 #: Share of the foreground that may be veil before the clarity falls.
 VEIL_TOLERATED = 0.1
 #: Grain (fine/medium energy ratio) above which the clarity falls, and how fast.
@@ -67,6 +80,7 @@ class Quality:
     """The quality measures of one picture (see the module docstring)."""
 
     coverage: float  # share of the picture that is clearly shown (foreground minus veil)
+    box: bool  # the silhouette is the volume's box: its empty space is painted
     veil: float  # share of the foreground that is veil
     grain: float  # fine/medium energy ratio of the foreground's lightness
     separation: float  # a*b* spread of the clearly shown pixels
@@ -80,7 +94,30 @@ class Quality:
         return dict(self.__dict__)
 
 
-BLANK = Quality(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+BLANK = Quality(0.0, False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+def box_silhouette(fg: np.ndarray) -> bool:
+    """Whether the foreground's outline is the volume's box seen in perspective.
+
+    Painting the background's values fills the whole box, and its silhouette becomes a
+    convex polygon of four to six straight sides; the outline of an object is curved. The
+    largest blob (holes filled) must fill its convex hull (:data:`BOX_SOLIDITY`), take
+    :data:`BOX_AREA` of the picture, and follow a polygon of at most :data:`BOX_SIDES` sides.
+    """
+    filled = ndimage.binary_fill_holes(ndimage.binary_closing(fg, iterations=2))
+    labels, n = ndimage.label(filled)
+    if n == 0:
+        return False
+    sizes = ndimage.sum(filled, labels, range(1, n + 1))
+    blob = labels == 1 + int(np.argmax(sizes))
+    area = int(blob.sum())
+    if area < BOX_AREA * blob.size:
+        return False
+    if area < BOX_SOLIDITY * int(convex_hull_image(blob).sum()):
+        return False
+    contour = max(find_contours(np.pad(blob, 1).astype(np.float32), 0.5), key=len)
+    return len(approximate_polygon(contour, tolerance=2.0)) - 1 <= BOX_SIDES
 
 
 def _entropy(counts: np.ndarray) -> float:
@@ -108,7 +145,9 @@ def quality(rgb: np.ndarray) -> Quality:
         return BLANK
     chroma = np.hypot(lab[..., 1], lab[..., 2])
     saturation = chroma / np.sqrt(chroma**2 + light**2 + 1e-6)
-    veil_px = fg & (((dist < VEIL_DELTA_E) & (saturation < VEIL_SATURATION)) | (dist < VEIL_DIM))
+    box = box_silhouette(fg)
+    dim = dist < (np.inf if box else VEIL_DELTA_E)  # in a painted box, bright fog too
+    veil_px = fg & ((dim & (saturation < VEIL_SATURATION)) | (dist < VEIL_DIM))
     # A veil is an area: thin grey lines (fine vessels, edges seen at 128 px) are structure.
     veil_px = ndimage.binary_opening(veil_px, structure=np.ones((3, 3), bool))
     veil = float(veil_px.sum()) / n
@@ -120,8 +159,10 @@ def quality(rgb: np.ndarray) -> Quality:
     clear = fg & ~veil_px
     clarity = (1.0 - max(0.0, veil - VEIL_TOLERATED) / (1.0 - VEIL_TOLERATED)) ** 2
     clarity *= float(np.exp(-GRAIN_RATE * max(0.0, grain - GRAIN_FREE)))
+    if box:
+        clarity *= BOX_PENALTY
     if not clear.any():
-        return Quality(0.0, veil, grain, 0.0, 0.0, 0.0, clarity, 0.0, 0.0)
+        return Quality(0.0, box, veil, grain, 0.0, 0.0, 0.0, clarity, 0.0, 0.0)
     q = ((img[clear] * 255.0).astype(np.int32) // 32).clip(0, 7)
     entropy = _entropy(np.bincount(q[:, 0] * 64 + q[:, 1] * 8 + q[:, 2], minlength=512))
     ab = lab[clear][:, 1:].astype(np.float64)
@@ -135,6 +176,6 @@ def quality(rgb: np.ndarray) -> Quality:
     )
     discrimination = (min(1.5, separation / SEPARATION_UNIT) + 0.3 * min(1.0, crispness)) * clarity
     return Quality(
-        coverage, veil, grain, separation, crispness, entropy, clarity,
+        coverage, box, veil, grain, separation, crispness, entropy, clarity,
         float(richness), float(discrimination),
     )  # fmt: skip

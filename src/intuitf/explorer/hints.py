@@ -163,7 +163,12 @@ def hinted_tf(
             m = others[int(order.pop())]
             mean, width = m.center, min(bounds.width[1], max(bounds.width[0], m.spread))
         else:
-            mean, width = float(rng.uniform(*bounds.mean)), bounds.sample_width(rng)
+            # Anywhere but on a hinted material (that one is already as the words say).
+            for _ in range(10):
+                mean = float(rng.uniform(*bounds.mean))
+                if not any(h.reaches(mean) for h in placed):
+                    break
+            width = bounds.sample_width(rng)
         if rng.random() < hide_prob:
             height = 0.0
         else:

@@ -1,0 +1,126 @@
+"""Material hints: part of the first population on them, mutations drawn toward them."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from intuitf.explorer import (
+    Bounds,
+    CMAExplorer,
+    GeneticExplorer,
+    MutationParams,
+    explorer_from_state,
+    mutate,
+)
+from intuitf.explorer.hints import Hint, as_hints, hint_for, hinted_tf
+from intuitf.tf import Gaussian, GaussianTF
+from intuitf.tf.defaults import Material
+
+IVORY = (0.98, 0.96, 0.88)
+RED = (0.86, 0.12, 0.12)
+BONE = Hint("bone", center=0.7, spread=0.02, color=IVORY, height=(0.3, 1.0))
+SKIN = Hint("skin", center=0.2, spread=0.015, color=RED, height=(0.03, 0.15))
+HINTS = (BONE.to_dict(), SKIN.to_dict())
+
+
+def _histogram() -> np.ndarray:
+    s = (np.arange(256) + 0.5) / 256
+    h = 1e5 * np.exp(-0.5 * (s / 0.02) ** 2) + 5.0
+    for c, a in ((0.3, 2e4), (0.7, 3e3)):
+        h += a * np.exp(-0.5 * ((s - c) / 0.018) ** 2)
+    return h
+
+
+def test_hint_forms_and_checks():
+    assert as_hints(HINTS) == (BONE, SKIN)
+    assert Hint.from_dict(BONE.to_dict()) == BONE
+    with pytest.raises(ValueError):
+        Hint("x", center=1.5)
+    with pytest.raises(ValueError):
+        Hint("x", height=(0.5, 0.1))
+    assert hint_for(0.71, (BONE, SKIN)) is BONE
+    assert hint_for(0.45, (BONE, SKIN)) is None
+    anywhere = Hint("selection", color=(0.8, 0.7, 0.2))
+    assert hint_for(0.45, (anywhere,)) is anywhere
+
+
+def test_hinted_tf_shows_what_the_words_ask_and_keeps_the_rest_quiet():
+    rng = np.random.default_rng(0)
+    mats = [Material(0.3, 0.018, 0.8), Material(0.7, 0.018, 0.1)]
+    for _ in range(20):
+        tf = hinted_tf(rng, (BONE, SKIN), mats, 5, Bounds())
+        assert len(tf) == 5
+        bone = min(tf.gaussians, key=lambda g: abs(g.mean - 0.7))
+        skin = min(tf.gaussians, key=lambda g: abs(g.mean - 0.2))
+        assert abs(bone.mean - 0.7) < 0.02 and 0.3 <= bone.height <= 1.0
+        assert abs(skin.mean - 0.2) < 0.02 and 0.03 <= skin.height <= 0.15
+        assert np.abs(np.subtract(bone.color, IVORY)).max() < 0.25
+        assert np.abs(np.subtract(skin.color, RED)).max() < 0.25
+        others = [g for g in tf.gaussians if g is not bone and g is not skin]
+        assert all(g.height <= 0.03 for g in others)  # hidden or faint
+    hidden = Hint("fat", center=0.3, spread=0.02, hidden=True)
+    tf = hinted_tf(rng, (hidden,), mats, 2, Bounds())
+    assert min(tf.gaussians, key=lambda g: abs(g.mean - 0.3)).height == 0.0
+
+
+def test_first_population_holds_hinted_candidates():
+    ex = GeneticExplorer(population=30, n_gaussians=5, seed=1, histogram=_histogram(), hints=HINTS)
+    pop = ex.ask()
+    hinted = [c for c in pop if c.origin == "hint"]
+    assert len(hinted) == 15  # hint_share 0.5
+    assert sum(c.origin == "seed" for c in pop) >= 10  # histogram seeds still there
+    # Without hints nothing changes: the same seed gives the same population as before.
+    a = GeneticExplorer(population=12, seed=4, histogram=_histogram())
+    b = GeneticExplorer(population=12, seed=4, histogram=_histogram(), hints=())
+    assert [c.tf for c in a.ask()] == [c.tf for c in b.ask()]
+
+
+def test_mutation_draws_colour_and_height_toward_the_materials_hint():
+    p = MutationParams(
+        rate=0.0, mean_rate=0.0, mean_step=0.0, width_step=0.0, height_step=0.0,
+        color_rate=0.0, hue_step=0.0, sl_step=0.0, swap_prob=0.0, channel_prob=0.0,
+        hints=(BONE, SKIN), hint_prob=1.0,
+    )  # fmt: skip
+    tf = GaussianTF(
+        (
+            Gaussian(0.2, 0.02, 0.9, (0.1, 0.9, 0.1)),  # skin, too opaque and green
+            Gaussian(0.45, 0.02, 0.2, (0.1, 0.1, 0.9)),  # no hint here: unchanged
+            Gaussian(0.7, 0.02, 0.01, (0.5, 0.1, 0.5)),  # bone, too faint and purple
+        )
+    )
+    rng = np.random.default_rng(2)
+    out = mutate(tf, rng, p, Bounds())
+    skin, other, bone = out.gaussians
+    assert 0.03 <= skin.height <= 0.15 and np.abs(np.subtract(skin.color, RED)).max() < 0.25
+    assert 0.3 <= bone.height <= 1.0 and np.abs(np.subtract(bone.color, IVORY)).max() < 0.25
+    assert other == tf.gaussians[1]
+
+
+def test_refine_hint_recolours_the_selected_feature():
+    gold = Hint("selection", color=(0.83, 0.69, 0.22))
+    base = GaussianTF(
+        (Gaussian(0.3, 0.02, 0.05, (0.9, 0.3, 0.3)), Gaussian(0.8, 0.02, 0.6, (0.95, 0.95, 0.9)))
+    )
+    ex = GeneticExplorer(population=16, n_gaussians=2, seed=0, hints=[gold.to_dict()])
+    ex.set_stage("refine", generations=3, selected=[1], base=base)
+    pop = ex.ask()
+    near_gold = [
+        c for c in pop if np.abs(np.subtract(c.tf.gaussians[1].color, gold.color)).max() < 0.2
+    ]
+    assert len(near_gold) >= 3  # hint_prob 0.3 in refine
+    for c in pop:  # the unselected feature is frozen and as it was
+        g = c.tf.gaussians[0]
+        assert g.frozen and (g.mean, g.height, g.color) == (0.3, 0.05, (0.9, 0.3, 0.3))
+
+
+@pytest.mark.parametrize("cls", [GeneticExplorer, CMAExplorer])
+def test_hints_survive_the_saved_state(cls):
+    ex = cls(population=8, n_gaussians=3, seed=5, histogram=_histogram(), hints=HINTS)
+    ex.tell([c.id for c in ex.ask()])
+    state = json.loads(json.dumps(ex.state_dict()))
+    again = explorer_from_state(state)
+    assert again.hints == ex.hints == (BONE, SKIN)
+    assert [c.tf for c in again.ask()] == [c.tf for c in ex.ask()]
