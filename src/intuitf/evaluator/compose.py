@@ -1,7 +1,8 @@
 """How the images of one comparison are laid out for a multimodal model.
 
 By default each image is its own labelled part: the intent's images first (the reference, the
-sketch strokes drawn over their base, or the rendering before an edit), each after a text part
+sketch strokes drawn over their base, or the rendering before an edit and, when the Session
+gives the selection's pixels, that rendering with the selected features outlined), each after a text part
 that states its role, then the two candidates after the text parts "Image 1 ..." and
 "Image 2 ...". The alternative layout puts the two candidates side by side in one picture with
 their labels drawn above them (a few models compare better within one image).
@@ -39,6 +40,10 @@ SKETCH_LABEL = (
     "each stroke means 'make this region this colour'):"
 )
 BEFORE_LABEL = "Before the edit (the rendering the requested change applies to):"
+SELECTION_LABEL = (
+    "Selection (the same rendering before the edit, with the selected feature outlined in "
+    "magenta and everything else dimmed; the change should happen inside the outline):"
+)
 
 #: Geometry of the side-by-side composite: a label band above the panels and a gap between them.
 BAND = 32
@@ -51,7 +56,7 @@ _GAP_COLOUR = (128, 128, 128)
 class LabelledImage:
     """One image part and the text that says what it is."""
 
-    role: Literal["first", "second", "pair", "reference", "sketch", "before"]
+    role: Literal["first", "second", "pair", "reference", "sketch", "before", "selection"]
     label: str
     image: np.ndarray
 
@@ -215,9 +220,16 @@ def intent_images(intent: Intent) -> list[LabelledImage]:
             raise JudgeError(
                 "An edit intent needs the rendering before the edit.", "Give it as Intent.base."
             )
-        return [
-            LabelledImage("before", BEFORE_LABEL, _as_rgb(intent.base, "rendering before the edit"))
-        ]
+        base = _as_rgb(intent.base, "rendering before the edit")
+        parts = [LabelledImage("before", BEFORE_LABEL, base)]
+        if intent.selection_mask is not None and np.asarray(intent.selection_mask).any():
+            # "Make this gold" needs the model to see which "this": the paper highlights
+            # selections to prevent miscommunication.
+            from intuitf.evaluator.selection import outline_selection
+
+            outlined = outline_selection(base, intent.selection_mask)
+            parts.append(LabelledImage("selection", SELECTION_LABEL, outlined))
+        return parts
     return []
 
 

@@ -115,8 +115,13 @@ def _intent_paragraph(intent: Intent) -> str:
         return (
             "The user selected a feature of the rendering labelled 'Before the edit' and asked "
             f'for this change to it:\n"{(intent.text or "").strip()}"\n'
-            "The change should happen in the selected feature, and everything else should stay "
-            "as it was before the edit."
+            + (
+                "The image labelled 'Selection' shows the selected feature outlined in magenta. "
+                if intent.selection_mask is not None and intent.selection_mask.any()
+                else ""
+            )
+            + "The change should happen in the selected feature, and everything else should "
+            "stay as it was before the edit."
         )
     return "Judge the candidates on the quality of the visualisation alone."
 

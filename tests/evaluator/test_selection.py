@@ -1,0 +1,145 @@
+"""Where an edit should happen: the selection mask, and a model judge that is shown it."""
+
+from __future__ import annotations
+
+import asyncio
+
+import numpy as np
+import pytest
+
+from intuitf.evaluator.aspects import aspects_for
+from intuitf.evaluator.compose import BEFORE_LABEL, SELECTION_LABEL, comparison_images
+from intuitf.evaluator.metric import MetricJudge
+from intuitf.evaluator.mllm import MLLMJudge
+from intuitf.evaluator.prompts import user_prompt
+from intuitf.evaluator.selection import outline_selection, selection_mask
+from intuitf.evaluator.types import Choice, Intent
+from intuitf.testing.fake_mllm import FakeMLLMServer
+
+S = 64
+
+
+def disk(r, cx=0.5, cy=0.5):
+    yy, xx = np.mgrid[0:S, 0:S] / S
+    return (xx - cx) ** 2 + (yy - cy) ** 2 < r**2
+
+
+def test_mask_from_attribution():
+    attr = np.zeros((3, S, S), np.float32)
+    attr[0][disk(0.4)] = 0.5  # a faint shell over everything
+    attr[2][disk(0.15, 0.6, 0.6)] = 0.45  # the selected feature
+    attr[1][disk(0.1, 0.3, 0.3)] = 0.4
+    m = selection_mask(attr, [2])
+    assert m.shape == (S, S) and m.dtype == bool
+    inside = disk(0.13, 0.6, 0.6)
+    assert m[inside].mean() > 0.95
+    assert not m[disk(0.1, 0.3, 0.3)].any() and not m[~disk(0.4)].any()
+    # Several selected features: their union.
+    assert selection_mask(attr, [1, 2])[disk(0.08, 0.3, 0.3)].all()
+    with pytest.raises(ValueError):
+        selection_mask(attr, [3])
+
+
+def test_outline_marks_the_selection_and_dims_the_rest():
+    base = np.full((S, S, 3), 200, np.uint8)
+    m = disk(0.2)
+    out = outline_selection(base, m)
+    assert (out[m] == 200).all()
+    ring = np.argwhere(~m & np.roll(m, 2, axis=1))
+    assert ring.size and tuple(out[tuple(ring[0])]) == (255, 0, 255)
+    far = ~disk(0.35)
+    assert (out[far] < 120).all()
+    # A mask of another size is fitted to the picture.
+    big = np.kron(m, np.ones((2, 2), bool))
+    assert outline_selection(base, big).shape == base.shape
+
+
+def _edit_pictures():
+    base = np.zeros((S, S, 3), np.uint8)
+    base[disk(0.4)] = (90, 30, 30)  # faint red skin
+    base[disk(0.15, 0.6, 0.6)] = (240, 235, 220)  # the crown, ivory
+    mask = disk(0.15, 0.6, 0.6)
+    gold = base.copy()
+    gold[mask] = (212, 175, 55)
+    spilt = gold.copy()
+    spilt[disk(0.4) & ~mask] = (160, 130, 40)  # gold everywhere
+    return base, mask, gold, spilt
+
+
+def test_metric_judge_measures_the_edit_in_the_selection():
+    base, mask, gold, spilt = _edit_pictures()
+    intent = Intent(kind="edit", text="make the crown gold", base=base, selected=(2,),
+                    selection_mask=mask)  # fmt: skip
+    edit = aspects_for("edit")
+    j = MetricJudge()
+    v = asyncio.run(j.compare(base, gold, edit, intent))
+    assert v.per_aspect["edit_instruction_alignment"] is Choice.SECOND
+    assert v.overall is Choice.SECOND  # the unchanged base no longer wins
+    v = asyncio.run(j.compare(spilt, gold, edit, intent))
+    assert v.per_aspect["structure_preservation"] is Choice.SECOND
+    assert v.overall is Choice.SECOND
+    # Each step toward the colour counts (no plateau at zero).
+    half = base.copy()
+    half[mask] = (226, 205, 138)
+    assert (
+        j.score(base, "edit_instruction_alignment", intent)
+        < j.score(half, "edit_instruction_alignment", intent)
+        < j.score(gold, "edit_instruction_alignment", intent)
+    )
+    # Opacity words: "more transparent" prefers the selection fading toward the background.
+    faded = base.copy()
+    faded[mask] = (110, 108, 100)
+    fade = Intent(kind="edit", text="make it more transparent", base=base, selection_mask=mask)
+    assert (
+        asyncio.run(j.compare(base, faded, edit, fade)).per_aspect["edit_instruction_alignment"]
+        is Choice.SECOND
+    )
+
+
+def test_the_selection_is_part_of_the_intent_fingerprint():
+    base, mask, _, _ = _edit_pictures()
+    a = Intent(kind="edit", text="gold", base=base, selection_mask=mask)
+    b = Intent(kind="edit", text="gold", base=base, selection_mask=np.roll(mask, 3, axis=0))
+    c = Intent(kind="edit", text="gold", base=base)
+    assert len({a.fingerprint(), b.fingerprint(), c.fingerprint()}) == 3
+
+
+def test_a_model_judge_is_shown_the_selection(monkeypatch):
+    base, mask, gold, _ = _edit_pictures()
+    intent = Intent(kind="edit", text="make this gold", base=base, selected=(2,),
+                    selection_mask=mask)  # fmt: skip
+    parts = comparison_images(gold, base, intent)
+    assert [p.role for p in parts] == ["before", "selection", "first", "second"]
+    assert parts[0].label == BEFORE_LABEL and parts[1].label == SELECTION_LABEL
+    assert "'Selection'" in user_prompt(aspects_for("edit"), intent)
+    # Without a mask nothing changes.
+    plain = Intent(kind="edit", text="make this gold", base=base, selected=(2,))
+    assert [p.role for p in comparison_images(gold, base, plain)] == ["before", "first", "second"]
+    assert "'Selection'" not in user_prompt(aspects_for("edit"), plain)
+
+    # Over HTTP, the request the model gets carries the outlined picture after its label.
+    sent: list[list[dict]] = []
+    original = MLLMJudge._complete
+
+    async def spy(self, messages, schema, estimate):
+        sent.append(messages)
+        return await original(self, messages, schema, estimate)
+
+    monkeypatch.setattr(MLLMJudge, "_complete", spy)
+    with FakeMLLMServer(target=gold) as srv:
+        judge = MLLMJudge("default", base_url=srv.base_url, swap="never")
+
+        async def ask():
+            try:
+                return await judge.compare(gold, base, aspects_for("edit"), intent)
+            finally:
+                await judge.aclose()
+
+        v = asyncio.run(ask())
+    assert v.error is None and v.overall is Choice.FIRST
+    content = sent[0][1]["content"]
+    texts = [p["text"] for p in content if p["type"] == "text"]
+    assert SELECTION_LABEL in texts
+    k = next(i for i, p in enumerate(content) if p.get("text") == SELECTION_LABEL)
+    assert content[k + 1]["type"] == "image_url"
+    assert content[k + 1]["image_url"]["url"].startswith("data:image/png;base64,")
