@@ -36,6 +36,8 @@ STATIC_DIR = Path(__file__).parent / "static"
 #: Hidden folder in the runs folder for uploads (RunStore lists only folders with a run.json).
 UPLOADS = ".uploads"
 DEFAULT_MAX_UPLOAD = 512 * 1024 * 1024
+#: Step along the rays of a drag frame, in voxels (a still's is 0.5).
+DRAG_STEP = 1.0
 
 #: Evaluator specs the page offers as examples.
 EVALUATOR_EXAMPLES = [
@@ -94,7 +96,7 @@ class WebState:
         self.max_upload_bytes = max_upload_bytes
         self.default_settings = dict(default_settings or {})
         self.sse_keepalive = sse_keepalive
-        self._renderers = _LRU(8)
+        self._renderers = _LRU(12)
         self.candidates = _LRU(512)
         self.images = _LRU(256)
         self.create_lock = asyncio.Lock()
@@ -108,6 +110,21 @@ class WebState:
         got = self._renderers.get_(key)
         if got is None or got[0] is not volume:
             got = (volume, ViewRenderer(volume, background=tuple(background)))
+            self._renderers.put(key, got)
+        return got[1]
+
+    def drag_renderer(self, volume, background, size: int, shading: bool):
+        """A renderer for drag frames: ``size`` pixels, samples a voxel apart along each ray
+        (half as dense as a still, as it has half the pixels; opacity is corrected for the
+        step, so the picture looks the same, only coarser)."""
+        from intuitf.render import VolumeRenderer
+
+        key = ("drag", id(volume), tuple(round(float(c), 4) for c in background), size, shading)
+        got = self._renderers.get_(key)
+        if got is None or got[0] is not volume:
+            r = VolumeRenderer(volume, size=size, shading=shading,
+                               background=tuple(background), sample_distance=DRAG_STEP)  # fmt: skip
+            got = (volume, r)
             self._renderers.put(key, got)
         return got[1]
 

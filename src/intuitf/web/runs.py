@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -137,6 +138,7 @@ class LiveRun:
         self._ready.wait()
 
     def _main(self) -> None:
+        _lower_priority()
         loop = asyncio.new_event_loop()
         self.loop = loop
         self._ready.set()
@@ -217,6 +219,15 @@ class LiveRun:
             return True
         except TimeoutError:
             return False
+
+
+def _lower_priority(niceness: int = 5) -> None:
+    """Let this thread (a run's judging and bookkeeping) yield the CPU to the server's own
+    threads, so that views stay responsive while runs go (Linux: per-thread nice value)."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), niceness)
+    except (AttributeError, OSError):  # other systems: the run just shares the CPU evenly
+        pass
 
 
 class NotLive(Exception):

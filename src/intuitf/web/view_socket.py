@@ -148,9 +148,8 @@ class ViewSocket:
         vr = self.web.view_renderer(volume, bg)
         if quality == "drag":
             size = min(DRAG_MAX, max(16, size // 2))
-            image = await render_scheduler().run(
-                lambda: vr.view(tf, camera, size, shaded), INTERACTIVE
-            )
+            drag = self.web.drag_renderer(volume, bg, size, shaded)
+            image = await render_scheduler().run(lambda: drag.render(tf, camera), INTERACTIVE)
             data, fmt = await asyncio.to_thread(encode_jpeg, image), "jpeg"
         else:
             image = await render_scheduler().run(
@@ -170,16 +169,18 @@ class ViewSocket:
 
 
 def _full(vr, tf, camera, size: int, shaded: bool, highlight: list[int]):
-    """A still from the view's sample cache (shared with a click's pick that follows)."""
+    """A still; with features to highlight, from the view's sample cache (which a click's
+    pick from the same camera then shares), else ray-marched directly (cheaper than
+    sampling the volume into a cache)."""
     from intuitf.session.views import VISIBLE_SHARE
 
+    valid = [i for i in highlight if 0 <= i < len(tf)]
+    if not valid:
+        return vr.view(tf, camera, size, shaded)
     cache = vr.sample_cache(camera, size, shaded)
     image = cache.render(tf)
-    valid = [i for i in highlight if 0 <= i < len(tf)]
-    if valid:
-        att = cache.attribution(tf)
-        image = outline(image, (att[valid] >= VISIBLE_SHARE).any(axis=0))
-    return image
+    att = cache.attribution(tf)
+    return outline(image, (att[valid] >= VISIBLE_SHARE).any(axis=0))
 
 
 @router.websocket("/api/view")
