@@ -543,13 +543,20 @@ class RayBackend:
 
     name = "ray"
 
-    def __init__(self, config: BatchConfig, workers: int | None, address: str | None) -> None:
+    def __init__(
+        self,
+        config: BatchConfig,
+        workers: int | None,
+        address: str | None,
+        started_here: bool = False,
+    ) -> None:
         ray = import_ray()
         self.ray = ray
-        self.started_here = False
         if not ray.is_initialized():
             _ray_init(ray, address)
-        self.started_here = address in (None, "", "local")
+            started_here = True
+        #: Whether this batch started the Ray instance (and so shuts it down at the end).
+        self.started_here = started_here
         ledger = None
         if config.uses_model:
             from intuitf.batch.budget import LEDGER_NAME, ray_ledger
@@ -659,10 +666,12 @@ def drive(
             pending.append(it)
     if not pending:
         return results
+    started_ray = False
     if use_ray:
         ray = import_ray()
         if not ray.is_initialized():
             _ray_init(ray, ray_address)
+            started_ray = True
         n_workers = int(workers or max(1, int(ray.cluster_resources().get("CPU", 1.0))))
     else:
         n_workers = max(1, min(workers or (os.cpu_count() or 1), len(pending)))
@@ -673,7 +682,7 @@ def drive(
     if rate_per_min:
         config.rate_per_s = float(rate_per_min) / 60.0 / n_workers
     if use_ray:
-        backend: Any = RayBackend(config, n_workers, ray_address)
+        backend: Any = RayBackend(config, n_workers, ray_address, started_here=started_ray)
     else:
         backend = PoolBackend(config, n_workers)
     load = [0] * backend.workers

@@ -69,11 +69,13 @@ def _foreground_cdf(counts: np.ndarray, cut: float) -> tuple[np.ndarray, np.ndar
 
 
 def _describe(mats: list[Material], counts: np.ndarray, cut: float) -> np.ndarray:
-    """Per material: (position above the background, foreground quantile)."""
+    """Per material: (position between the background and the top of the foreground (its
+    99.9th percentile, so a few extreme voxels do not squash the scale), foreground quantile)."""
     centers, cdf = _foreground_cdf(counts, cut)
+    top = float(centers[min(len(centers) - 1, int(np.searchsorted(cdf, 0.999)))])
     out = []
     for m in mats:
-        pos = (m.center - cut) / max(1e-6, 1.0 - cut)
+        pos = (m.center - cut) / max(1e-6, top - cut)
         q = float(np.interp(m.center, centers, cdf))
         out.append((float(np.clip(pos, 0, 1)), q))
     return np.asarray(out, np.float64).reshape(-1, 2)
@@ -120,16 +122,35 @@ def _monotone(points: list[tuple[float, float]]) -> tuple[list[float], list[floa
     return xs, ys
 
 
+def _quantile(counts: np.ndarray, cut: float, q: float) -> float:
+    centers, cdf = _foreground_cdf(counts, cut)
+    return float(centers[min(len(centers) - 1, int(np.searchsorted(cdf, q)))])
+
+
 def material_map(ref_counts: np.ndarray, target_counts: np.ndarray) -> ValueMap:
     """The value map that takes each material of the reference histogram to its partner in
-    the target's (both histograms over normalised [0, 1])."""
+    the target's (both histograms over normalised [0, 1]).
+
+    Anchors: the background cut-offs; the dominant histogram peak of each; the other peaks,
+    aligned in order below and above it; and the top of the foreground (its 99th and 99.9th percentiles, where dense material such as bone sits
+    in a long tail without a peak of its own).
+    """
     rc, tc = np.asarray(ref_counts, np.float64), np.asarray(target_counts, np.float64)
     cut_r, cut_t = background_cutoff(rc), background_cutoff(tc)
-    mr, mt = find_materials(rc, max_materials=6), find_materials(tc, max_materials=6)
+    peaks_r = [m for m in find_materials(rc, max_materials=6) if m.fraction > 0]
+    peaks_t = [m for m in find_materials(tc, max_materials=6) if m.fraction > 0]
     pairs: list[tuple[float, float]] = []
-    if mr and mt:
-        da, db = _describe(mr, rc, cut_r), _describe(mt, tc, cut_t)
-        pairs = [(mr[i].center, mt[j].center) for i, j in _align(da, db)]
+    if peaks_r and peaks_t:
+        # The dominant material of each (soft tissue in most scans) anchors the rest: the
+        # peaks below it are aligned with those below it, the peaks above with those above.
+        i0 = max(range(len(peaks_r)), key=lambda i: peaks_r[i].fraction)
+        j0 = max(range(len(peaks_t)), key=lambda j: peaks_t[j].fraction)
+        da, db = _describe(peaks_r, rc, cut_r), _describe(peaks_t, tc, cut_t)
+        below = _align(da[:i0], db[:j0])
+        above = [(i0 + 1 + i, j0 + 1 + j) for i, j in _align(da[i0 + 1 :], db[j0 + 1 :])]
+        pairs = [(peaks_r[i].center, peaks_t[j].center) for i, j in [*below, (i0, j0), *above]]
+    for q in (0.99, 0.999):
+        pairs.append((_quantile(rc, cut_r, q), _quantile(tc, cut_t, q)))
     points = [(0.0, 0.0), (1.0, 1.0), *pairs]
     if cut_r > 0 and cut_t > 0:
         points.append((cut_r, cut_t))
