@@ -10,6 +10,14 @@ individual per generation: SSIM and mean colour error (CIELAB ΔE) to the target
 
     python benchmarks/recovery.py                # tooth and engine, all methods, population study
     python benchmarks/recovery.py --quick        # fewer generations, one volume
+    python benchmarks/recovery.py --hints-study  # text intents, with and without material hints
+
+The hints study gives each hidden target its own description as a text intent (``TEXTS``; the
+judge still prefers the rendering closer to the target picture, like a person who has it in
+mind) and runs the GA with and without the material hints the text yields
+(``RunSettings.material_hints``; the palette from the text's colours is on in both): the SSIM
+of generation 0's best, the paid judge calls until the best reaches SSIM 0.90, and the final
+SSIM, mean of the seeds (``--seeds``, 5 for the study by default).
 """
 
 from __future__ import annotations
@@ -60,6 +68,17 @@ TARGETS = {
     ),
 }
 
+#: Each target's own description: the text intent of the hints study.
+TEXTS = {
+    "tooth_103x94x161_uint8.raw.gz": "A tooth with a blue crown, ivory dentin and a faint orange "
+    "outline",
+    "engine_256x256x128_uint8.raw.gz": "A blue translucent engine block with opaque orange dense "
+    "parts",
+}
+
+#: SSIM the hints study counts the judge calls to.
+GOAL = 0.90
+
 #: The view each volume is judged from.
 CAMERAS = {
     "tooth_103x94x161_uint8.raw.gz": Camera(),
@@ -85,7 +104,15 @@ def ssim_oracle(target: np.ndarray):
     return score
 
 
-def run_method(vol, camera, target_img, server, method, population, generations, size, seed):
+def run_method(
+    vol, camera, target_img, server, method, population, generations, size, seed,
+    text=None, hints=True,
+):  # fmt: skip
+    """Per generation: the SSIM and colour error of the judged best, paid calls, time.
+
+    ``text``: a text intent (else the target picture as a reference image); ``hints``: the
+    material hints of that text on or off.
+    """
     judge = MLLMJudge(
         "default",
         base_url=server.base_url,
@@ -103,8 +130,9 @@ def run_method(vol, camera, target_img, server, method, population, generations,
         seed=seed,
         shading=False,
         camera=camera.to_dict(),
+        material_hints=hints,
     )
-    intent = Intent(kind="image", reference=target_img)
+    intent = Intent(kind="text", text=text) if text else Intent(kind="image", reference=target_img)
     session = Session.create(vol, intent=intent, judge=judge, settings=settings)
     rows = []
     t0 = time.perf_counter()
@@ -134,7 +162,9 @@ def main() -> int:
     ap.add_argument("--population", type=int, default=32)
     ap.add_argument("--size", type=int, default=128)
     ap.add_argument("--seed", type=int, default=0, help="first seed")
-    ap.add_argument("--seeds", type=int, default=3, help="runs per method, averaged")
+    ap.add_argument(
+        "--seeds", type=int, default=None, help="runs per method, averaged (3; hints study 5)"
+    )
     ap.add_argument(
         "--oracle",
         choices=("ssim", "mad"),
@@ -145,12 +175,19 @@ def main() -> int:
     ap.add_argument("--methods", default="ga,paper-ga,cmaes,random")
     ap.add_argument("--no-population-study", action="store_true")
     ap.add_argument("--plot", default=str(Path(__file__).with_name("out") / "recovery.png"))
+    ap.add_argument(
+        "--hints-study",
+        action="store_true",
+        help="text intents (TEXTS), GA with and without material hints (5 seeds unless --seeds)",
+    )
     args = ap.parse_args()
+    if args.hints_study:
+        return hints_study(args)
     volumes = list(TARGETS)[:1] if args.quick else list(TARGETS)
     gens = 6 if args.quick else args.generations
     methods = args.methods.split(",")
     results: dict[tuple[str, str], list[dict]] = {}
-    seeds = list(range(args.seed, args.seed + args.seeds))
+    seeds = list(range(args.seed, args.seed + (args.seeds or 3)))
 
     def averaged(vol, camera, target_img, method, population):
         """Per-generation means over the seeds (each seed: its own server noise and search)."""
@@ -239,6 +276,84 @@ def main() -> int:
         print(f"\nplot: {args.plot}")
     except Exception as exc:  # the table is the result; the plot is a convenience
         print(f"(no plot: {exc})", file=sys.stderr)
+    return 0
+
+
+def hints_study(args) -> int:
+    """Generation 0's best and the calls to SSIM 0.90, with and without material hints."""
+    seeds = list(range(args.seed, args.seed + (args.seeds or 5)))
+    volumes = list(TARGETS)[:1] if args.quick else list(TARGETS)
+    gens = 6 if args.quick else args.generations
+    table = []
+    for name in volumes:
+        vol = load_volume(DATA / name)
+        camera = CAMERAS[name]
+        target_img = VolumeRenderer(vol, size=args.size, shading=False).render(
+            TARGETS[name], camera
+        )
+        for hints in (False, True):
+            runs = []
+            for seed in seeds:
+                with FakeMLLMServer(
+                    score=ssim_oracle(target_img), noise=0.10, position_bias=0.20, seed=seed
+                ) as srv:
+                    runs.append(
+                        run_method(
+                            vol,
+                            camera,
+                            target_img,
+                            srv,
+                            "ga",
+                            args.population,
+                            gens,
+                            args.size,
+                            seed,
+                            text=TEXTS[name],
+                            hints=hints,
+                        )  # fmt: skip
+                    )
+            reached = [next((r["calls"] for r in run if r["ssim"] >= GOAL), None) for run in runs]
+            row = dict(
+                volume=name.split("_")[0],
+                hints="on" if hints else "off",
+                gen0=float(np.mean([run[0]["ssim"] for run in runs])),
+                gen0_min=float(min(run[0]["ssim"] for run in runs)),
+                final=float(np.mean([run[-1]["ssim"] for run in runs])),
+                reached=sum(c is not None for c in reached),
+                # Runs that never reach the goal count with all their calls (a lower bound).
+                calls=float(
+                    np.mean(
+                        [
+                            c if c is not None else run[-1]["calls"]
+                            for c, run in zip(reached, runs, strict=True)
+                        ]
+                    )
+                ),  # fmt: skip
+                per_gen=[float(np.mean([run[g]["ssim"] for run in runs])) for g in range(gens)],
+            )
+            table.append(row)
+            print(
+                f"{row['volume']:7s} hints {row['hints']:3s}  gen0 best SSIM {row['gen0']:.3f} "
+                f"(min {row['gen0_min']:.3f})  calls to {GOAL:.2f}: {row['calls']:.0f} "
+                f"(reached in {row['reached']}/{len(seeds)})  final {row['final']:.3f}",
+                flush=True,
+            )
+    print(f"\nMean of {len(seeds)} seeds, population {args.population}, {gens} generations, "
+          f"{args.size} px; text intents:")  # fmt: skip
+    for name in volumes:
+        print(f'  {name.split("_")[0]}: "{TEXTS[name]}"')
+    print(
+        f"\n| volume | hints | gen 0 best SSIM | calls to SSIM {GOAL:.2f} | reached | final SSIM |"
+    )
+    print("|---|---|---|---|---|---|")
+    for r in table:
+        print(
+            f"| {r['volume']} | {r['hints']} | {r['gen0']:.3f} | {r['calls']:.0f} | "
+            f"{r['reached']}/{len(seeds)} | {r['final']:.3f} |"
+        )
+    print("\nPer generation, mean SSIM of the best:")
+    for r in table:
+        print(f"{r['volume']:7s} {r['hints']:3s} " + " ".join(f"{v:.3f}" for v in r["per_gen"]))
     return 0
 
 

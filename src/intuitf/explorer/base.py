@@ -12,7 +12,7 @@ from intuitf.explorer.bounds import Bounds
 from intuitf.explorer.candidate import Candidate, candidate_id
 from intuitf.explorer.fitness import rank_fitness
 from intuitf.explorer.genome import is_duplicate_of_any
-from intuitf.explorer.hints import Hint, as_hints, hinted_tf
+from intuitf.explorer.hints import Hint, as_hints, hint_for, hinted_tf
 from intuitf.explorer.operators import MutationParams, mutate
 from intuitf.explorer.population import materials_of, random_tf, seeded_tf
 from intuitf.explorer.stages import STAGES, StagePreset
@@ -307,7 +307,7 @@ class BaseExplorer:
         )
 
     def _seeded(self) -> GaussianTF:
-        return seeded_tf(
+        tf = seeded_tf(
             self._rng,
             self._materials,
             self.n_gaussians,
@@ -315,6 +315,18 @@ class BaseExplorer:
             value_range=self.value_range,
             color=self._color,
         )
+        placed = [h for h in self.hints if h.center is not None and h.color is not None]
+        if not placed:
+            return tf
+        # A Gaussian on a material the words give a colour takes that colour (mostly): a
+        # palette colour on the wrong material (an ivory crown for "blue crown, ivory
+        # dentin") looks as good to a judge that cannot tell a crown from a root.
+        gs = list(tf.gaussians)
+        for k, g in enumerate(gs):
+            h = hint_for(g.mean, placed)
+            if h is not None and self._rng.random() < self._preset.palette_share:
+                gs[k] = replace(g, color=self.bounds.sample_palette_color(self._rng, [h.color]))
+        return tf.with_gaussians(gs)
 
     def _fresh_population(
         self, initial: Sequence[GaussianTF], size: int | None = None, keep: Sequence[Candidate] = ()

@@ -69,11 +69,16 @@ class MutationParams:
 
 
 def _mutate_color(
-    color: tuple[float, float, float], rng: np.random.Generator, p: MutationParams, b: Bounds
+    color: tuple[float, float, float],
+    rng: np.random.Generator,
+    p: MutationParams,
+    b: Bounds,
+    own: tuple[float, float, float] | None = None,
 ) -> tuple[float, float, float]:
     if p.palette and rng.random() < p.recolor_prob:
         # A jump to a colour the intent names: HSL steps take many generations to get there.
-        return b.sample_palette_color(rng, p.palette)
+        # On a material the words give a colour (``own``), that colour, not another's.
+        return b.sample_palette_color(rng, [own] if own is not None else p.palette)
     if rng.random() < p.channel_prob:
         # Recombine the colour's own channels: a new hue of the same saturation and lightness.
         perm = rng.permutation(3)
@@ -156,16 +161,31 @@ def mutate(
                 elif hint.height is not None:
                     height = sample_hint_height(rng, hint.height, b)
         gs[i] = replace(g, mean=mean, width=width, height=height)
-    if len(free) >= 2 and rng.random() < p.swap_prob:
+    # The colour each Gaussian's material should have, by the words (no random number spent).
+    own = {i: _hint_colour(gs[i].mean, p.hints) for i in free} if p.hints else {}
+    swap = len(free) >= 2 and rng.random() < p.swap_prob
+    if swap:
         i, j = (int(k) for k in rng.choice(free, size=2, replace=False))
-        gs[i], gs[j] = replace(gs[i], color=gs[j].color), replace(gs[j], color=gs[i].color)
-    else:
+        if own.get(i) is not None and own.get(j) is not None and own[i] != own[j]:
+            swap = False  # the words gave these two materials their colours: keep them apart
+        else:
+            gs[i], gs[j] = replace(gs[i], color=gs[j].color), replace(gs[j], color=gs[i].color)
+    if not swap:
         for i in free:
-            gs[i] = replace(gs[i], color=_mutate_color(gs[i].color, rng, p, b))
+            gs[i] = replace(gs[i], color=_mutate_color(gs[i].color, rng, p, b, own.get(i)))
     for i, hint in hinted.items():
         if hint.color is not None:
             gs[i] = replace(gs[i], color=b.sample_palette_color(rng, [hint.color]))
     return tf.with_gaussians(gs)
+
+
+def _hint_colour(mean: float, hints: Sequence[Hint]) -> tuple[float, float, float] | None:
+    """The colour the hint of the material at ``mean`` asks for (None: no hint, or no colour).
+
+    Only hints placed on a material count (an edit's unplaced hint is drawn by ``hint_prob``).
+    """
+    h = hint_for(mean, [x for x in hints if x.center is not None])
+    return None if h is None else h.color
 
 
 def _swap(a: Gaussian, b: Gaussian, attrs: Sequence[str]) -> tuple[Gaussian, Gaussian]:
