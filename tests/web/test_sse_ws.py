@@ -121,16 +121,23 @@ def _connect(server, **kw):
     return connect(f"{server.ws_url}/api/view?token={TOKEN}", open_timeout=30, **kw)
 
 
-def _frames(ws, quiet: float = 1.5):
-    """Header/binary pairs (and errors) until nothing more arrives for ``quiet`` seconds."""
+def _frames(ws, last: int, quiet: float = 1.0, timeout: float = 120.0):
+    """Header/binary pairs (and errors) until the answer to request ``last`` and then
+    ``quiet`` seconds of silence (anything else that comes is collected too)."""
     out = []
+    deadline = time.monotonic() + timeout
+    seen_last = False
     while True:
+        wait = quiet if seen_last else max(0.1, deadline - time.monotonic())
         try:
-            msg = ws.recv(timeout=quiet)
+            msg = ws.recv(timeout=wait)
         except TimeoutError:
-            return out
+            if seen_last:
+                return out
+            raise AssertionError(f"no answer to request {last} within {timeout} s: {out}")
         assert isinstance(msg, str), "a binary message without its header"
         head = json.loads(msg)
+        seen_last = seen_last or head.get("req") == last
         if "error" in head:
             out.append((head, None))
             continue
@@ -146,7 +153,7 @@ def test_newest_camera_wins(server):
                 "background": [0, 0, 0], "quality": "full"}  # fmt: skip
         for i in range(1, 6):
             ws.send(json.dumps({**base, "req": i, "camera": {"azimuth": 10 * i, "elevation": 5}}))
-        frames = _frames(ws)
+        frames = _frames(ws, last=5)
     assert [h["req"] for h, _ in frames] == [1, 5]
     for head, data in frames:
         assert head["format"] == "png" and head["quality"] == "full"
@@ -161,17 +168,17 @@ def test_drag_frames_are_small_jpegs_and_errors_come_back(server, http, finished
         req = {"req": 7, "target": {"candidate": qid}, "camera": {"azimuth": 40},
                "size": 256, "shaded": False, "quality": "drag"}  # fmt: skip
         ws.send(json.dumps(req))
-        (head, data), *_ = _frames(ws, quiet=1.0)
+        (head, data), *_ = _frames(ws, last=7)
         assert head == {**head, "req": 7, "format": "jpeg", "width": 128, "height": 128}
         assert data[:2] == b"\xff\xd8"
         ws.send(json.dumps({**req, "req": 8, "quality": "full", "highlight": [0, 1]}))
-        (head, data), *_ = _frames(ws, quiet=1.0)
+        (head, data), *_ = _frames(ws, last=8)
         assert head["req"] == 8 and head["format"] == "png" and head["width"] == 256
         ws.send(json.dumps({**req, "req": 9, "target": {"candidate": "../../etc/g000-000"}}))
         ws.send(json.dumps({**req, "req": 10, "target": {"volume": "/etc/passwd", "tf": {}}}))
         ws.send(json.dumps({**req, "req": 11, "camera": {"zoom": -1}}))
         ws.send("not json")
-        got = _frames(ws, quiet=1.0)
+        got = _frames(ws, last=11)
     errors = [h for h, d in got if d is None]
     # the first request (the socket was idle) and the newest are always answered
     assert {e["req"] for e in errors} >= {9, 11, None}
