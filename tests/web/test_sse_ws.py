@@ -134,7 +134,7 @@ def _frames(ws, last: int, quiet: float = 1.0, timeout: float = 120.0):
         except TimeoutError:
             if seen_last:
                 return out
-            raise AssertionError(f"no answer to request {last} within {timeout} s: {out}")
+            raise AssertionError(f"no answer to request {last} within {timeout} s: {out}") from None
         assert isinstance(msg, str), "a binary message without its header"
         head = json.loads(msg)
         seen_last = seen_last or head.get("req") == last
