@@ -214,6 +214,12 @@ export function readHash() {
 
 /** Poll the history while some run (in any tab) is running, so every tab stays current. */
 export function startTreePolling() {
+  // The current run's details too, while it runs: its end (the folder's lock released just
+  // after the last event) and anything a dropped event stream missed.
+  setInterval(() => {
+    const d = state.runDetail;
+    if (d && d.info.status === "running" && document.visibilityState === "visible") refreshRun();
+  }, 2000);
   setInterval(() => {
     const anyRunning = JSON.stringify(state.tree).includes('"status":"running"');
     if (anyRunning && document.visibilityState === "visible") refreshTree();

@@ -121,7 +121,7 @@ function renderRun(node, depth) {
     },
     el(`span.dot.status-${info.status}`),
     el("span.run-name", { text: info.name }),
-    el(`span.badge.status-${info.status}`, { text: info.status }),
+    info.status !== "completed" ? el(`span.badge.status-${info.status}`, { text: info.status }) : null,
     el("span.run-intent", { text: intentText(info.intent) }),
     el("span.run-meta", {
       text: `${info.generations_done}/${info.generations || "?"} gen · ${fmtUsd((info.cost || {}).usd || 0)}`,
@@ -158,7 +158,7 @@ function renderRun(node, depth) {
           "span.gen-meta",
           {},
           el("span.gen-label", { text: `g${g.generation}` }),
-          el("span.gen-rating", { text: fmtRating(g.rating) }),
+          el("span.gen-rating", { text: `rating ${fmtRating(g.rating)}` }),
           matchNote(g.match_stats),
         ),
       ),

@@ -95,6 +95,7 @@ function setKind(k) {
         ? "Optional: say what to take from the picture"
         : "Optional: say what the strokes mean";
   if (k !== "sketch" && state.sketching) setSketching(false);
+  document.getElementById("view-stage").classList.toggle("show-sketch", k === "sketch");
   syncButtons();
 }
 
