@@ -12,5 +12,14 @@ if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = "0" ]; then
   fi
 fi
 
+# The browser tests drive Debian's Chromium through Playwright (a browser is never downloaded:
+# `playwright install` is not used). Installed only when missing and possible; without it the
+# browser tests are skipped and say so.
+if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = "0" ]; then
+  if ! command -v chromium >/dev/null 2>&1; then
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null
+  fi
+fi
+
 python -m pip install -q --disable-pip-version-check -e ".[test]"
 python -m pytest "$@"
