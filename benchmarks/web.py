@@ -37,13 +37,11 @@ import httpx
 
 def serve(port: int, runs: str, token: str, data: str | None) -> None:
     """The server process: ``intuitf serve`` without a browser, on ``port``."""
-    import uvicorn
-
-    from intuitf.web.app import create_app
+    from intuitf.web.app import create_app, make_server
 
     app = create_app(runs, [], data or None, token=token,
                      allowed_hosts=[f"127.0.0.1:{port}", f"localhost:{port}"])  # fmt: skip
-    uvicorn.run(app, host="127.0.0.1", port=port, log_level="warning", ws="auto")
+    make_server(app, "127.0.0.1", port).run()
 
 
 def free_port() -> int:

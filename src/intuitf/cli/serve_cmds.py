@@ -81,9 +81,7 @@ def register(app: typer.Typer) -> None:
         ] = None,
     ) -> None:
         """Start the web app: watch runs, steer them, and pick, refine and export results."""
-        import uvicorn
-
-        from intuitf.web.app import create_app
+        from intuitf.web.app import create_app, make_server
         from intuitf.web.security import new_token
 
         if data is None and os.environ.get("INTUITF_DATA"):
@@ -126,7 +124,4 @@ def register(app: typer.Typer) -> None:
                 webbrowser.open(url)
             except Exception:  # no browser on this machine: the printed URL is enough
                 pass
-        config = uvicorn.Config(
-            app, host=host, port=port, log_level="warning", ws="auto", lifespan="on"
-        )
-        uvicorn.Server(config).run()
+        make_server(app, host, port).run()

@@ -100,6 +100,51 @@ class WebState:
         self.candidates = _LRU(512)
         self.images = _LRU(256)
         self.create_lock = asyncio.Lock()
+        #: Set when the server begins to stop: event streams end, runs are cancelled.
+        self.stopping = False
+        self._stream_stoppers: set = set()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._closing_task: asyncio.Task | None = None
+
+    # -- stopping --------------------------------------------------------------------------
+    def bind(self, loop: asyncio.AbstractEventLoop) -> None:
+        self._loop = loop
+        self.registry.bind(loop)
+
+    def on_stop(self, fn) -> None:
+        """Call ``fn()`` (on the server's loop) when the server begins to stop."""
+        self._stream_stoppers.add(fn)
+
+    def forget_stop(self, fn) -> None:
+        self._stream_stoppers.discard(fn)
+
+    def begin_shutdown(self) -> None:
+        """End event streams and cancel runs at once (safe from a signal handler)."""
+        loop = self._loop
+        if loop is None or loop.is_closed():
+            return
+        try:
+            loop.call_soon_threadsafe(self._stop)
+        except RuntimeError:
+            pass
+
+    def _stop(self) -> None:
+        if self.stopping:
+            return
+        self.stopping = True
+        for fn in list(self._stream_stoppers):
+            try:
+                fn()
+            except Exception:
+                pass
+        self.registry._notify()
+        self._closing_task = asyncio.ensure_future(self.registry.close_all())
+
+    async def close(self) -> None:
+        self._stop()
+        if self._closing_task is not None:
+            await self._closing_task
+        await self.registry.close_all()
 
     # -- rendering helpers -----------------------------------------------------------------
     def view_renderer(self, volume, background=(0.0, 0.0, 0.0)):
@@ -257,12 +302,12 @@ def create_app(
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
-        web.registry.bind(asyncio.get_running_loop())
+        web.bind(asyncio.get_running_loop())
         web.create_lock = asyncio.Lock()
         try:
             yield
         finally:
-            await web.registry.close_all()
+            await web.close()
 
     app = FastAPI(
         title="intuitf",
@@ -338,3 +383,21 @@ def create_app(
         max_body_bytes=int(max_upload_bytes) + 1024 * 1024,
     )
     return app
+
+
+def make_server(app: FastAPI, host: str = "127.0.0.1", port: int = 8000, **config):
+    """A ``uvicorn.Server`` for ``app`` whose Ctrl-C ends event streams and cancels runs at
+    once (an open event stream would otherwise hold the server up until it closes)."""
+    import uvicorn
+
+    web: WebState = app.state.web
+
+    class _Server(uvicorn.Server):
+        def handle_exit(self, sig, frame) -> None:
+            web.begin_shutdown()
+            super().handle_exit(sig, frame)
+
+    config.setdefault("log_level", "warning")
+    config.setdefault("ws", "auto")
+    config.setdefault("timeout_graceful_shutdown", 5)
+    return _Server(uvicorn.Config(app, host=host, port=port, lifespan="on", **config))

@@ -31,7 +31,7 @@ async def run_events(web, name: str, since: int, keepalive: float) -> AsyncItera
     path = web.store.path_of(name) / "events.jsonl"
     last = max(0, int(since))
     yield f"retry: 2000\n: events of {name} after {last}\n\n"
-    while True:
+    while not web.stopping:
         changed = registry.changed_event()
         live = registry.get(name)
         if live is not None:
@@ -47,6 +47,8 @@ async def run_events(web, name: str, since: int, keepalive: float) -> AsyncItera
             unsubscribe = live.session.events.subscribe(push, since=last)
             closed = asyncio.ensure_future(live.wait_closed())
             closed.add_done_callback(lambda _f, q=queue: q.put_nowait(_CLOSED))
+            stop = lambda q=queue: q.put_nowait(_CLOSED)  # noqa: E731
+            web.on_stop(stop)
             try:
                 while True:
                     try:
@@ -63,6 +65,7 @@ async def run_events(web, name: str, since: int, keepalive: float) -> AsyncItera
             finally:
                 unsubscribe()
                 closed.cancel()
+                web.forget_stop(stop)
             continue
         # Not live here: what the run folder's journal holds, then wait for news.
         events = await asyncio.to_thread(read_events, path)
