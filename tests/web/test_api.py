@@ -320,3 +320,28 @@ def test_errors_are_json_with_a_message(client):
     r = client.post("/api/runs", json={"vol": "phantom"})
     assert r.status_code == 422 and isinstance(r.json()["detail"], str)
     assert client.post("/api/runs/nope/pause").status_code == 404
+
+
+def test_query_on_a_live_run_starts_a_stage_at_the_next_boundary(client):
+    r = client.post(
+        "/api/runs",
+        json={"volume": "phantom", "intent": "white bone", "settings": {"generations": 3}},
+    )
+    name = r.json()["name"]
+    r = client.post(
+        f"/api/runs/{name}/query",
+        json={"intent": {"kind": "text", "text": "faint red skin"}, "generations": 1},
+    )
+    assert r.status_code == 202, r.text
+    assert r.json()["status"] == "running"
+    d = wait_run(client, name)
+    assert d["info"]["status"] == "completed", d["info"]
+    # the journal has the query, and the run's plan ends with its customize stage
+    with client.stream("GET", f"/api/runs/{name}/events") as s:
+        body = ""
+        for chunk in s.iter_text():
+            body += chunk
+            if "event: run_ended" in body:
+                break
+    assert "event: query" in body and "faint red skin" in body
+    assert d["info"]["generations_done"] in (2, 3)

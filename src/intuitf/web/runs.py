@@ -125,6 +125,7 @@ class LiveRun:
         self.loop: asyncio.AbstractEventLoop | None = None
         self.thread: threading.Thread | None = None
         self.state = "starting"  # starting | running | closing | closed
+        self._calls = 0  # changes handed to the run's loop and not yet done
         self.outcome = None
         self.started = time.time()
         self._closed_waiters: list[tuple[asyncio.AbstractEventLoop, asyncio.Future]] = []
@@ -164,20 +165,19 @@ class LiveRun:
         try:
             while True:
                 self.outcome = await s.arun(write_outputs=False)
-                with self._lock:
-                    if s.has_deferred():
-                        s.run_deferred()
-                    if self.outcome.reason == "completed" and not s.done:
-                        continue  # a query made during the last generation extends the run
-                    self.state = "closing"
-                break
-            # Changes handed over just before closing still run (and answer their callers).
-            for _ in range(3):
-                await asyncio.sleep(0)
-            current = asyncio.current_task()
-            others = [t for t in asyncio.all_tasks() if t is not current]
-            if others:
-                await asyncio.gather(*others, return_exceptions=True)
+                # Changes handed over while the run ended are applied before deciding: a
+                # query made meanwhile (or during the last generation) extends the run.
+                while True:
+                    with self._lock:
+                        if self._calls == 0:
+                            s.run_deferred()
+                            go_on = self.outcome.reason == "completed" and not s.done
+                            if not go_on:
+                                self.state = "closing"
+                            break
+                    await asyncio.sleep(0.005)
+                if not go_on:
+                    break
             if s.run_dir is not None and s.last_ranking:
                 # Best pictures, exports and the report: rendered behind interactive views.
                 try:
@@ -200,9 +200,14 @@ class LiveRun:
         with self._lock:
             if self.state != "running" or self.loop is None:
                 raise NotLive(self.name)
+            self._calls += 1
 
             async def job():
-                return fn()
+                try:
+                    return fn()
+                finally:
+                    with self._lock:
+                        self._calls -= 1
 
             fut = asyncio.run_coroutine_threadsafe(job(), self.loop)
         return await asyncio.wrap_future(fut)
