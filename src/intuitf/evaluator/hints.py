@@ -15,7 +15,8 @@ and tail quantiles of :func:`intuitf.tf.defaults.find_materials`):
   hold; "dense parts" on the first material above that; "core", "inner", "densest" on the
   highest; "outline", "surface", "outer", "shell" on the boundary between the background and
   the first material. Hints are then kept in density order (a denser material never sits
-  below a lighter one).
+  below a lighter one). On a histogram peak a hint sits one spread below it, 1.5 spreads
+  wide: a material is seen where its surface is, on the flank toward what surrounds it.
 
 It says plainly which words it does not understand (:attr:`TextHints.unknown`); a word it
 does not know changes nothing. The Explorer gets the hints as plain numbers
@@ -151,6 +152,11 @@ _KNOWN_WORDS = set(
 _WORD_RE = re.compile(r"[a-z][a-z'-]*")
 _CLAUSE_SPLIT = re.compile(r"[,;.:!?]|\band\b|\bwith\b|\bbut\b|\bwhile\b|\bwhereas\b|\bplus\b")
 
+
+#: A material peak's hint sits this many of its spreads below the peak (on its lower flank,
+#: where its surface is) and is this many times its spread wide.
+FLANK = 1.0
+FLANK_WIDTH = 1.5
 
 # -- hints -------------------------------------------------------------------------------------
 
@@ -479,7 +485,13 @@ class _Layout:
             i = top - 1 if s[top][0] > 0.985 and top > 0 else top
         else:
             i = main
-        c, spread, _ = s[int(i)]
+        c, spread, frac = s[int(i)]
+        if frac > 0.0:
+            # A material is seen where its surface is: on the lower flank of its peak, where
+            # it meets what lies around it (a Gaussian there shows the surface and, wider,
+            # the material behind it).
+            c -= FLANK * spread
+            spread *= FLANK_WIDTH
         return c, max(spread, 0.012)
 
     def slot_of(self, center: float) -> int:

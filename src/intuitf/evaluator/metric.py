@@ -508,8 +508,11 @@ def _clause_presence(f: _Features, name: str, mod: str | None) -> float:
     dh = np.abs(np.angle(np.exp(1j * (hue - t_hue))))
     tinted = (dh < np.radians(30)) & (chroma > 8)
     if mod == "faint":
+        # A faint layer lets the background through: darker (over a dark background) or
+        # paler (over a light one) than the colour itself, never as strong.
         solid = np.linalg.norm(pix - target, axis=1) < _NAMED_DELTA_E * 0.6
-        tinted &= ~solid
+        toward_bg = np.abs(pix[:, 0] - f.bg_lab[0]) < 0.8 * abs(target[0] - f.bg_lab[0])
+        tinted &= ~solid & toward_bg
     return _saturating(tinted.mean(), _CLAUSE_SATURATION * 1.5)
 
 
