@@ -180,6 +180,8 @@ def test_hand_edit_is_a_point_of_the_history(client, done_run):
     assert eq.endswith("/g000-000") and eq.startswith("edit")
     got = client.get(f"/api/candidates/{eq}").json()
     assert got["tf"]["gaussians"] == tf["gaussians"] and got["parents"] == [qid]
+    gallery = client.get(f"/api/runs/{eq.split('/')[0]}").json()["gallery"]
+    assert [g["qid"] for g in gallery] == [eq]
     info = next(r for r in client.get("/api/runs").json() if r["name"] == eq.split("/")[0])
     assert info["parent"]["run"] == name and info["status"] == "edited"
     tree = client.get("/api/tree").json()

@@ -257,6 +257,14 @@ def _gallery_from_checkpoint(web, name: str) -> list[dict]:
     except IntuitfError:
         ckpt = {}
     ranking, ratings, tfs = ckpt.get("ranking", []), ckpt.get("ratings", {}), ckpt.get("tfs", {})
+    if not ranking:  # no checkpoint (a hand edit, an old run): the journal's last generation
+        gens = rd.generations()
+        cands = (
+            sorted(gens[-1].get("candidates", []), key=lambda c: c.get("rank", 0)) if gens else []
+        )
+        ranking = [c["id"] for c in cands]
+        ratings = {c["id"]: c.get("rating") for c in cands}
+        tfs = {c["id"]: c.get("tf") for c in cands}
     out, seen = [], set()
     for rank, cid in enumerate(ranking, start=1):
         key = repr(tfs.get(cid))
