@@ -128,6 +128,7 @@ def _print_summary(outcome, session, started: float) -> None:
         f"{outcome.generations_done} generation(s), {c.calls} paid call(s), {c.cached_calls} from cache, "
         f"{c.input_tokens + c.output_tokens} tokens, ${c.usd:.4f}, {time.perf_counter() - started:.1f} s."
     )
+    _print_lost_requests(outcome)
     _print_match_stats(outcome)
     if outcome.run_dir is not None:
         color = "green" if outcome.completed else "yellow"
@@ -294,7 +295,7 @@ def register(app: typer.Typer) -> None:
             _print_lock_note(session)
             if session.judge_moved:
                 console.print(
-                    f"Moving this run to [bold]{escape(session.judge_name)}[/] from generation "
+                    f"Moving this run to [bold]{escape(_where(session))}[/] from generation "
                     f"{session.generation + 1} on (recorded in run.json)."
                 )
             if session.done:
@@ -405,3 +406,28 @@ def _refinement(tf_path: Path, select: str | None, text: str | None) -> tuple[di
             f"--select must name Gaussians 1..{len(tf)} of {tf_path}; got {select!r}."
         )
     return tf.to_dict(), picked
+
+
+def _where(session) -> str:
+    """The run's judge and server, credentials redacted."""
+    from intuitf.evaluator.providers import redact_url
+
+    j = session.spec.judge
+    return redact_url(j.spec) + (f" at {redact_url(j.base_url)}" if j.base_url else "")
+
+
+def _print_lost_requests(outcome) -> None:
+    """Requests a killed process sent but never saw answered: the server saw (and may bill)
+    them, and the budget counts them, so the summary says so too."""
+    store = outcome.run_dir / "verdicts.sqlite" if outcome.run_dir is not None else None
+    if store is None or not store.exists():
+        return
+    from intuitf.evaluator.cache import VerdictCache
+
+    with VerdictCache(store) as cache:
+        calls, usd = cache.unsettled()
+    if calls:
+        console.print(
+            f"…plus {calls} request(s) a stopped process sent without seeing the answer "
+            f"(about ${usd:.4f}); the budget counts them."
+        )

@@ -184,7 +184,7 @@ class SessionOpening:
                     "volume": volume.summary(),
                     "intent": _intent_record(intent),
                     "judge": _judge_name(judge),
-                    "judges": [{"judge": _judge_name(judge), "from_generation": 0}],
+                    "judges": _judge_history(spec, 0),
                     "settings": settings.to_dict(),
                     "plan": [list(p) for p in plan],
                     "initial": [tf.to_dict() for tf in initial],
@@ -299,7 +299,7 @@ class SessionOpening:
                 record["spec"] = stored
                 judges = record.setdefault("judges", [])
                 if moved:
-                    judges.append({"judge": _judge_name(judge), "from_generation": generation})
+                    judges.extend(_judge_history(spec, generation))
                     record["judge"] = _judge_name(judge)
                 rd.write_run(record)
             if ckpt and ckpt.get("intent"):
@@ -527,3 +527,10 @@ def _candidate_tf(rd: RunDirectory, candidate: str) -> GaussianTF:
         f"No candidate {candidate!r} in {rd.root}.",
         "Use an id from the run's history, like g003-007.",
     )
+
+
+def _judge_history(spec: RunSpec, generation: int) -> list[dict]:
+    """run.json's record of a judge taking over at ``generation`` (credentials redacted)."""
+    from intuitf.evaluator.factory import judge_record
+
+    return judge_record(spec.judge.spec, spec.judge.base_url, generation)["judges"]
