@@ -7,8 +7,10 @@ Run: ``python benchmarks/web.py`` (options: ``--volume ID``, ``--data DIR``, ``-
 
 Measured, all while the run is going (and again with no run, for comparison):
 
-- drag frames: ``quality: "drag"`` for a 256-pixel view (128² JPEG), the next request sent as
-  soon as a frame arrives (one in flight, as the page does): request → picture, median / p90;
+- drag frames: ``quality: "drag"`` for a 256-pixel view (a 128² JPEG, or 96² / 64² when the
+  server's adaptive level of detail finds the machine too slow for its 40 ms budget; the sides
+  are printed; ``--no-lod`` keeps 128²), the next request sent as soon as a frame arrives (one
+  in flight, as the page does): request → picture, median / p90;
 - full stills: 256² shaded PNG, request → picture;
 - first gallery update: from ``POST /api/runs`` to the first ``generation_ended`` event;
 - event delivery: the event's own time (set when the run emitted it) to its receipt here.
@@ -35,11 +37,11 @@ import time
 import httpx
 
 
-def serve(port: int, runs: str, token: str, data: str | None) -> None:
+def serve(port: int, runs: str, token: str, data: str | None, budget: float | None) -> None:
     """The server process: ``intuitf serve`` without a browser, on ``port``."""
     from intuitf.web.app import create_app, make_server
 
-    app = create_app(runs, [], data or None, token=token,
+    app = create_app(runs, [], data or None, token=token, drag_budget_ms=budget,
                      allowed_hosts=[f"127.0.0.1:{port}", f"localhost:{port}"])  # fmt: skip
     make_server(app, "127.0.0.1", port).run()
 
@@ -91,10 +93,15 @@ class EventReader(threading.Thread):
                         data = None
 
 
+#: The sides of the frames each measurement got (drag frames adapt theirs to the machine).
+SIDES: dict[str, list[list[int]]] = {}
+
+
 def frames(ws_url: str, target: dict, quality: str, n: int, shaded: bool = True):
     """Round-trip times (ms) of ``n`` requests, each sent when the previous frame arrived,
     and the server's own times (the headers' ``ms``)."""
     server_ms: list[float] = []
+    sides: list[int] = []
     from websockets.sync.client import connect
 
     out = []
@@ -112,6 +119,8 @@ def frames(ws_url: str, target: dict, quality: str, n: int, shaded: bool = True)
             if i:  # the first frame warms the socket and the target up
                 out.append((time.perf_counter() - t) * 1000.0)
                 server_ms.append(float(head["ms"]))
+                sides.append(int(head["width"]))
+    SIDES[quality] = SIDES.get(quality, []) + [sides]
     return out, server_ms
 
 
@@ -124,19 +133,34 @@ def main() -> None:
     ap.add_argument("--generations", type=int, default=60)
     ap.add_argument("--frames", type=int, default=40, help="drag frames per measurement")
     ap.add_argument("--stills", type=int, default=12, help="full stills per measurement")
-    ap.add_argument("--serve", nargs=4, metavar=("PORT", "RUNS", "TOKEN", "DATA"),
+    ap.add_argument(
+        "--no-lod",
+        action="store_true",
+        help="drag frames always 128² (no adaptive level of detail)",
+    )
+    ap.add_argument("--serve", nargs=5, metavar=("PORT", "RUNS", "TOKEN", "DATA", "BUDGET"),
                     help=argparse.SUPPRESS)  # fmt: skip
     args = ap.parse_args()
     if args.serve:
-        port, runs, token, data = args.serve
-        serve(int(port), runs, token, None if data == "-" else data)
+        port, runs, token, data, budget = args.serve
+        serve(int(port), runs, token, None if data == "-" else data,
+              None if budget == "-" else float(budget))  # fmt: skip
         return
 
     load_before = os.getloadavg()[0]
     port, token = free_port(), "bench-token"
     runs = tempfile.mkdtemp(prefix="intuitf-web-bench-")
     server = subprocess.Popen(
-        [sys.executable, __file__, "--serve", str(port), runs, token, args.data or "-"],
+        [
+            sys.executable,
+            __file__,
+            "--serve",
+            str(port),
+            runs,
+            token,
+            args.data or "-",
+            "-" if args.no_lod else "40",
+        ],
         env={**os.environ, "PYTHONUNBUFFERED": "1"},
     )
     base = f"http://127.0.0.1:{port}"
@@ -218,13 +242,16 @@ def main() -> None:
           f"{os.getloadavg()[0]:.1f} (before the start {load_before:.1f})")  # fmt: skip
     print(f"{'measure (ms)':<52}{'n':>5}{'median':>9}{'p90':>9}{'max':>9}{'server':>9}"
           f"{'target':>9}{'met':>6}")  # fmt: skip
-    row("drag frame 128² JPEG, run going", busy_drag, 50)
+    row("drag frame JPEG, run going", busy_drag, 50)
     row("full still 256² shaded PNG, run going", busy_full, 150)
-    row("drag frame 128² JPEG, same TF, no run", idle_drag, None)
+    row("drag frame JPEG, same TF, no run", idle_drag, None)
     row("full still 256² shaded PNG, same TF, no run", idle_full, None)
     row("event delivery (event time -> receipt)", delays, 200)
     print(f"{'first gallery update (POST /api/runs -> gen 0 ended)':<52}{1:>5}"
           f"{first_gallery * 1000:>9.0f}")  # fmt: skip
+    for label, runs_ in (("run going", SIDES["drag"][1]), ("no run", SIDES["drag"][2])):
+        counts = {side: runs_.count(side) for side in sorted(set(runs_), reverse=True)}
+        print(f"drag frame sides, {label}: " + ", ".join(f"{k}²×{v}" for k, v in counts.items()))
     print(f"view: the run's best candidate after its first generation ({qid}); generations the "
           f"run finished while frames were measured: {gens_during}; still going at the end: "
           f"{still_running}")  # fmt: skip

@@ -85,6 +85,7 @@ class WebState:
         default_settings: dict | None,
         sse_keepalive: float,
         max_live_runs: int,
+        drag_budget_ms: float | None = 40.0,
     ) -> None:
         self.runs_dir = runs_dir
         self.store = RunStore(runs_dir)
@@ -96,6 +97,8 @@ class WebState:
         self.max_upload_bytes = max_upload_bytes
         self.default_settings = dict(default_settings or {})
         self.sse_keepalive = sse_keepalive
+        #: Render time a drag frame aims at (ms); None: always half the view's size.
+        self.drag_budget_ms = drag_budget_ms
         self._renderers = _LRU(12)
         self.candidates = _LRU(512)
         self.images = _LRU(256)
@@ -264,6 +267,7 @@ def create_app(
     default_settings: dict | None = None,
     sse_keepalive: float = 15.0,
     max_live_runs: int = 4,
+    drag_budget_ms: float | None = 40.0,
 ) -> FastAPI:
     """The intuitf web app over the runs folder ``runs_dir``.
 
@@ -272,7 +276,9 @@ def create_app(
     token (a fresh one if None: read it back from ``app.state.web.token``); ``allowed_hosts``
     are the Host header values served (``name`` for any port or ``name:port``; default
     127.0.0.1, localhost and [::1]); ``max_upload_bytes`` limits uploads. ``default_settings``
-    fill in run settings a spec leaves out (tests use small ones).
+    fill in run settings a spec leaves out (tests use small ones). ``drag_budget_ms`` is the
+    render time drag frames aim at (their side shrinks from 128 to 96 or 64 pixels on a slow
+    machine; None keeps 128).
     """
     from intuitf import __version__
     from intuitf.web import (
@@ -298,6 +304,7 @@ def create_app(
         default_settings=default_settings,
         sse_keepalive=float(sse_keepalive),
         max_live_runs=int(max_live_runs),
+        drag_budget_ms=drag_budget_ms,
     )
 
     @asynccontextmanager

@@ -33,6 +33,7 @@ from intuitf.web.common import (
     encode_jpeg,
     encode_png,
     outline,
+    render_rgb8,
     tf_of,
 )
 
@@ -40,6 +41,10 @@ router = APIRouter()
 
 #: Largest side of a frame while dragging.
 DRAG_MAX = 128
+#: Sides a drag frame may shrink to when the machine is slow (adaptive level of detail).
+DRAG_LEVELS = (128, 96, 64)
+#: Render time a drag frame aims at (ms): the side is chosen from the last frames' speed.
+DRAG_BUDGET_MS = 40.0
 
 
 class ViewSocket:
@@ -53,6 +58,9 @@ class ViewSocket:
         self.send_lock = asyncio.Lock()
         self.task: asyncio.Task | None = None
         self._tfs: dict[str, Any] = {}
+        #: Recent render time per pixel of drag frames (ms), for the adaptive level of detail.
+        self._ms_per_px: float | None = None
+        self.budget = getattr(web, "drag_budget_ms", DRAG_BUDGET_MS)
         #: What was rendered (request numbers), for tests and benchmarks.
         self.rendered: list[int] = []
 
@@ -102,6 +110,16 @@ class ViewSocket:
         finally:
             self.busy = False
 
+    def _drag_size(self, want: int) -> int:
+        """The side of the next drag frame: ``want``, or a smaller level when the last drag
+        frames took longer than the budget (they grow back when the machine is faster)."""
+        if not self.budget or self._ms_per_px is None:
+            return want
+        for side in DRAG_LEVELS:
+            if side <= want and side * side * self._ms_per_px <= self.budget:
+                return side
+        return min(want, DRAG_LEVELS[-1])
+
     async def _error(self, req, error: str, hint: str | None) -> None:
         async with self.send_lock:
             try:
@@ -147,9 +165,19 @@ class ViewSocket:
         tf, volume = await self._target(req.get("target"))
         vr = self.web.view_renderer(volume, bg)
         if quality == "drag":
-            size = min(DRAG_MAX, max(16, size // 2))
+            size = self._drag_size(min(DRAG_MAX, max(16, size // 2)))
             drag = self.web.drag_renderer(volume, bg, size, shaded)
-            image = await render_scheduler().run(lambda: drag.render(tf, camera), INTERACTIVE)
+
+            def render_drag():
+                t = time.perf_counter()
+                out = render_rgb8(drag, tf, camera)
+                return out, (time.perf_counter() - t) * 1000.0
+
+            image, ms = await render_scheduler().run(render_drag, INTERACTIVE)
+            per_px = ms / (size * size)
+            self._ms_per_px = (
+                per_px if self._ms_per_px is None else (0.5 * self._ms_per_px + 0.5 * per_px)
+            )
             data, fmt = await asyncio.to_thread(encode_jpeg, image), "jpeg"
         else:
             image = await render_scheduler().run(
@@ -176,7 +204,7 @@ def _full(vr, tf, camera, size: int, shaded: bool, highlight: list[int]):
 
     valid = [i for i in highlight if 0 <= i < len(tf)]
     if not valid:
-        return vr.view(tf, camera, size, shaded)
+        return render_rgb8(vr.renderer(size, shaded), tf, camera)
     cache = vr.sample_cache(camera, size, shaded)
     image = cache.render(tf)
     att = cache.attribution(tf)
