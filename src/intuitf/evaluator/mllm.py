@@ -76,7 +76,7 @@ from intuitf.evaluator.providers import (
     redact_url,
     require_api_key,
 )
-from intuitf.evaluator.types import Aspect, Choice, Cost, Intent, Verdict
+from intuitf.evaluator.types import Aspect, Choice, Cost, Intent, Verdict, combine_answers
 
 log = logging.getLogger(__name__)
 
@@ -603,20 +603,8 @@ def _follow_up(messages: list[dict], reason: str, answer: str | None) -> list[di
 def _combine(
     results: list[_OrderResult], aspects: list[Aspect]
 ) -> tuple[Choice, float, dict[str, Choice]]:
-    """Average the answers per aspect, then weight aspects into P(first better) and a choice."""
-    per: dict[str, Choice] = {}
-    p_num = 0.0
-    w_sum = 0.0
-    for a in aspects:
-        s = sum(r.per_aspect.get(a.key, Choice.TIE).score for r in results) / len(results)
-        per[a.key] = (
-            Choice.FIRST if s > 0.5 + 1e-9 else Choice.SECOND if s < 0.5 - 1e-9 else Choice.TIE
-        )
-        p_num += a.weight * s
-        w_sum += a.weight
-    p = p_num / w_sum if w_sum else 0.5
-    overall = Choice.FIRST if p > 0.5 + 1e-9 else Choice.SECOND if p < 0.5 - 1e-9 else Choice.TIE
-    return overall, (p if overall is not Choice.TIE else 0.5), per
+    """The answers of one or both orders, combined by the one rule (``combine_answers``)."""
+    return combine_answers([r.per_aspect for r in results], aspects)
 
 
 def _content_order(first: np.ndarray, second: np.ndarray) -> bool:

@@ -57,7 +57,7 @@ from typing import Literal
 import numpy as np
 
 from intuitf.errors import IntuitfError
-from intuitf.evaluator.types import Aspect, Choice, Cost, Intent, Judge, Verdict
+from intuitf.evaluator.types import Aspect, Cost, Intent, Judge, Verdict, combine_answers
 
 Protocol = Literal["efficient", "paper"]
 ProgressFn = Callable[[int, int, int, Cost], None]
@@ -621,13 +621,7 @@ class _State:
 
 def _merge(a: Verdict, b: Verdict, aspects: Sequence[Aspect]) -> Verdict:
     """Two verdicts on the same ordered pair, averaged per aspect (like asking both orders)."""
-    keys = list(dict.fromkeys([*a.per_aspect, *b.per_aspect]))
-    per = {}
-    for k in keys:
-        sc = (a.per_aspect.get(k, Choice.TIE).score + b.per_aspect.get(k, Choice.TIE).score) / 2
-        per[k] = Choice.FIRST if sc > 0.5 else Choice.SECOND if sc < 0.5 else Choice.TIE
-    p = (a.p_first + b.p_first) / 2
-    overall = Choice.FIRST if p > 0.5 + 1e-9 else Choice.SECOND if p < 0.5 - 1e-9 else Choice.TIE
+    overall, p, per = combine_answers([a.per_aspect, b.per_aspect], aspects)
     rationale = dict(a.rationale)
     for k, v in b.rationale.items():
         rationale[k] = f"{rationale[k]} | (other order) {v}" if k in rationale else v

@@ -246,18 +246,46 @@ class Verdict:
         )
 
 
+def combine_answers(
+    answers: Sequence[dict[str, Choice]], aspects: Sequence[Aspect]
+) -> tuple[Choice, float, dict[str, Choice]]:
+    """The one rule that turns answers into a verdict.
+
+    Per aspect, the mean score over ``answers`` (first 1, tie ½, second 0; an answer silent on
+    an aspect counts as a tie); overall, P(first better) is the aspects' weighted mean score,
+    over the aspects any answer spoke to (an aspect not in ``aspects`` weighs 1). Returns
+    (overall choice, P(first better), per-aspect choices); a tie has P exactly ½. Used for one
+    answer (the metric judge), both orders of a pair (the model judge) and a re-asked match
+    (the tournament).
+    """
+    weights = {a.key: a.weight for a in aspects}
+    spoken = {k for ans in answers for k in ans}
+    keys = [a.key for a in aspects if a.key in spoken]
+    keys += sorted(spoken - set(keys))
+    per: dict[str, Choice] = {}
+    num = den = 0.0
+    for k in keys:
+        score = sum(ans.get(k, Choice.TIE).score for ans in answers) / max(1, len(answers))
+        per[k] = _choice(score)
+        num += weights.get(k, 1.0) * score
+        den += weights.get(k, 1.0)
+    p = num / den if den else 0.5
+    overall = _choice(p)
+    return overall, (p if overall is not Choice.TIE else 0.5), per
+
+
 def weighted_overall(
     per_aspect: dict[str, Choice], aspects: Sequence[Aspect]
 ) -> tuple[Choice, float]:
-    """Combine per-aspect choices by aspect weight into an overall choice and P(first better)."""
-    weights = {a.key: a.weight for a in aspects}
-    total = sum(weights.get(k, 1.0) for k in per_aspect) or 1.0
-    p = sum(weights.get(k, 1.0) * c.score for k, c in per_aspect.items()) / total
-    if p > 0.5 + 1e-9:
-        return Choice.FIRST, p
-    if p < 0.5 - 1e-9:
-        return Choice.SECOND, p
-    return Choice.TIE, 0.5
+    """One answer's overall choice and P(first better) (see :func:`combine_answers`)."""
+    overall, p, _ = combine_answers([per_aspect], aspects)
+    return overall, p
+
+
+def _choice(score: float) -> Choice:
+    return (
+        Choice.FIRST if score > 0.5 + 1e-9 else Choice.SECOND if score < 0.5 - 1e-9 else Choice.TIE
+    )
 
 
 @runtime_checkable
