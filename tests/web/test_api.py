@@ -347,3 +347,25 @@ def test_query_on_a_live_run_starts_a_stage_at_the_next_boundary(client):
                 break
     assert "event: query" in body and "faint red skin" in body
     assert d["info"]["generations_done"] in (2, 3)
+
+
+def test_a_run_that_fails_says_so_in_its_events(client, monkeypatch):
+    from intuitf.web.runs import LiveSession
+
+    async def broken(self):
+        raise RuntimeError("kaboom")
+
+    monkeypatch.setattr(LiveSession, "astep", broken)
+    r = client.post("/api/runs", json={"volume": "phantom", "name": "broken"})
+    name = r.json()["name"]
+    d = wait_run(client, name)
+    assert d["info"]["status"] in ("new", "stopped")
+    monkeypatch.undo()
+    with client.stream("GET", f"/api/runs/{name}/events") as s:
+        body = ""
+        for chunk in s.iter_text():
+            body += chunk
+            if "event: run_ended" in body:
+                break
+    assert '"reason":"error"' in body and "kaboom" in body
+    assert client.get("/api/info").status_code == 200  # the server goes on

@@ -164,7 +164,15 @@ class LiveRun:
         s = self.session
         try:
             while True:
-                self.outcome = await s.arun(write_outputs=False)
+                try:
+                    self.outcome = await s.arun(write_outputs=False)
+                except Exception as exc:  # a bug, not a run condition: say so, then close
+                    log.exception("run %s failed", self.name)
+                    with self._lock:
+                        self.state = "closing"
+                    s.events.emit("run_ended", reason="error", message=f"The run failed: {exc}",
+                                  generation=s.generation)  # fmt: skip
+                    return
                 # Changes handed over while the run ended are applied before deciding: a
                 # query made meanwhile (or during the last generation) extends the run.
                 while True:
