@@ -61,8 +61,6 @@ class ViewSocket:
         #: Recent render time per pixel of drag frames (ms), for the adaptive level of detail.
         self._ms_per_px: float | None = None
         self.budget = getattr(web, "drag_budget_ms", DRAG_BUDGET_MS)
-        #: What was rendered (request numbers), for tests and benchmarks.
-        self.rendered: list[int] = []
 
     async def serve(self) -> None:
         try:
@@ -184,7 +182,6 @@ class ViewSocket:
                 lambda: _full(vr, tf, camera, size, shaded, highlight), INTERACTIVE
             )
             data, fmt = await asyncio.to_thread(encode_png, image), "png"
-        self.rendered.append(req.get("req"))
         header = {
             "req": req.get("req"),
             "width": int(image.shape[1]),
