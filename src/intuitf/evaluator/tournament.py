@@ -48,15 +48,15 @@ whatever order the concurrent matches finish in, because updates are applied in 
 from __future__ import annotations
 
 import asyncio
-import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
 
 from intuitf.errors import IntuitfError
+from intuitf.evaluator.matches import MatchRecord, MatchStats, TournamentResult
+from intuitf.evaluator.ratings import bradley_terry, default_rounds, elo_expected
 from intuitf.evaluator.types import Aspect, Cost, Intent, Judge, Verdict, combine_answers
 
 Protocol = Literal["efficient", "paper"]
@@ -68,230 +68,15 @@ MatchFn = Callable[["MatchRecord"], None]
 #: practice: with log2(n) + 2 rounds each player has met only a handful of the others).
 _PAIRING_STEP_LIMIT = 200_000
 
-
-@dataclass
-class MatchRecord:
-    """One judged match: in round ``round`` (1-based), ``first`` was shown first."""
-
-    round: int
-    first: str
-    second: str
-    verdict: Verdict
-    #: True when the verdict averages a second ask in the other order (``recheck_above``).
-    rechecked: bool = False
-
-    def to_dict(self) -> dict:
-        return {
-            "round": self.round,
-            "first": self.first,
-            "second": self.second,
-            "verdict": self.verdict.to_dict(),
-            "rechecked": self.rechecked,
-        }
-
-    @classmethod
-    def from_dict(cls, d: dict) -> MatchRecord:
-        return cls(
-            int(d["round"]),
-            str(d["first"]),
-            str(d["second"]),
-            Verdict.from_dict(d["verdict"]),
-            bool(d.get("rechecked", False)),
-        )
-
-
-#: Above this share of undecided matches, a run's summary and report warn.
-UNDECIDED_WARNING = 0.05
-
-
-@dataclass
-class MatchStats:
-    """How many matches were decided (a usable answer), undecided (none), or needed a re-ask."""
-
-    matches: int = 0
-    decided: int = 0
-    undecided: int = 0
-    retried: int = 0
-
-    @classmethod
-    def of(cls, matches: Sequence[MatchRecord]) -> MatchStats:
-        out = cls()
-        for m in matches:
-            out.matches += 1
-            if m.verdict.decided:
-                out.decided += 1
-            else:
-                out.undecided += 1
-            if m.verdict.retries > 0:
-                out.retried += 1
-        return out
-
-    @classmethod
-    def from_journal(cls, entries: Sequence[dict]) -> MatchStats:
-        """The totals over journal "generation" entries (counted from their matches if needed)."""
-        out = cls()
-        for e in entries:
-            if "undecided" in e and "decided" in e:
-                out += cls(
-                    int(e.get("decided", 0)) + int(e.get("undecided", 0)),
-                    int(e.get("decided", 0)),
-                    int(e.get("undecided", 0)),
-                    int(e.get("retried", 0)),
-                )
-            else:
-                ms = []
-                for m in e.get("matches", []) or []:
-                    try:
-                        ms.append(MatchRecord.from_dict(m))
-                    except (KeyError, TypeError, ValueError):
-                        continue
-                out += cls.of(ms)
-        return out
-
-    def __iadd__(self, other: MatchStats) -> MatchStats:
-        self.matches += other.matches
-        self.decided += other.decided
-        self.undecided += other.undecided
-        self.retried += other.retried
-        return self
-
-    @property
-    def undecided_share(self) -> float:
-        return self.undecided / self.matches if self.matches else 0.0
-
-    @property
-    def warning(self) -> str | None:
-        """A sentence for the user when too many matches stayed undecided, else None."""
-        if self.undecided_share <= UNDECIDED_WARNING:
-            return None
-        return (
-            f"{self.undecided} of {self.matches} matches ({100 * self.undecided_share:.0f} %) "
-            "stayed undecided: the model gave no usable answer even when asked again, so the "
-            "ranking rests on less evidence than it seems. Check the model and its server (the "
-            "journal's verdict errors say what it answered)."
-        )
-
-    def to_dict(self) -> dict:
-        return {"decided": self.decided, "undecided": self.undecided, "retried": self.retried}
-
-    def summary(self) -> str:
-        return (
-            f"{self.matches} match(es): {self.decided} decided, {self.undecided} undecided, "
-            f"{self.retried} asked again"
-        )
-
-
-@dataclass
-class TournamentResult:
-    """Ratings, ranking (best first) and every judged match of one tournament.
-
-    ``elo`` holds the plain Elo ratings; ``ratings`` the ratings the ranking is based on (equal
-    to ``elo`` under the paper protocol, the Bradley-Terry fit under the efficient one).
-    ``complete`` is False for the partial result attached to an exception.
-    """
-
-    ratings: dict[str, float]
-    ranking: list[str]
-    matches: list[MatchRecord]
-    cost: Cost
-    rounds: int
-    wall_seconds: float
-    elo: dict[str, float] = field(default_factory=dict)
-    byes: list[tuple[int, str]] = field(default_factory=list)
-    protocol: str = "efficient"
-    complete: bool = True
-
-    def match_stats(self) -> MatchStats:
-        """Decided, undecided and re-asked matches of this tournament."""
-        return MatchStats.of(self.matches)
-
-    def to_dict(self) -> dict:
-        """A JSON-able form (verdicts via ``Verdict.to_dict``)."""
-        return {
-            "ratings": dict(self.ratings),
-            "elo": dict(self.elo),
-            "ranking": list(self.ranking),
-            "matches": [m.to_dict() for m in self.matches],
-            "byes": [[r, pid] for r, pid in self.byes],
-            "cost": self.cost.to_dict(),
-            "rounds": self.rounds,
-            "wall_seconds": self.wall_seconds,
-            "protocol": self.protocol,
-            "complete": self.complete,
-        }
-
-    @classmethod
-    def from_dict(cls, d: dict) -> TournamentResult:
-        return cls(
-            ratings={k: float(v) for k, v in d["ratings"].items()},
-            ranking=list(d["ranking"]),
-            matches=[MatchRecord.from_dict(m) for m in d["matches"]],
-            cost=Cost(**d.get("cost", {})),
-            rounds=int(d["rounds"]),
-            wall_seconds=float(d.get("wall_seconds", 0.0)),
-            elo={k: float(v) for k, v in d.get("elo", {}).items()},
-            byes=[(int(r), str(p)) for r, p in d.get("byes", [])],
-            protocol=str(d.get("protocol", "efficient")),
-            complete=bool(d.get("complete", True)),
-        )
-
-
-def default_rounds(n: int) -> int:
-    """``ceil(log2 n) + 2``, capped so that no pair has to meet twice (0 for n < 2)."""
-    if n < 2:
-        return 0
-    cap = n - 1 if n % 2 == 0 else n  # a round robin's length
-    return min(math.ceil(math.log2(n)) + 2, cap)
-
-
-def elo_expected(r_a: float, r_b: float) -> float:
-    """Probability that a player rated ``r_a`` beats one rated ``r_b``."""
-    return 1.0 / (1.0 + 10.0 ** ((r_b - r_a) / 400.0))
-
-
-def bradley_terry(
-    n: int,
-    games: Sequence[tuple[int, int, float]],
-    anchors: np.ndarray,
-    anchor_weight: float | np.ndarray = 1.0,
-    iterations: int = 1000,
-    tol: float = 1e-10,
-) -> np.ndarray:
-    """Bradley-Terry ratings (Elo scale) from ``(i, j, score_of_i)`` games among ``n`` players.
-
-    Each player also plays ``anchor_weight`` (a number, or one per player) virtual drawn games
-    against a fixed opponent rated ``anchors[i]``; this keeps undefeated or winless players
-    finite and pulls players with few games towards their starting rating. Solved by Hunter's
-    minorise-maximise iteration (each step raises the likelihood; converges in tens of steps).
-    """
-    weights = np.broadcast_to(np.asarray(anchor_weight, dtype=np.float64), (n,))
-    anchors = np.asarray(anchors, dtype=np.float64)
-    wins = 0.5 * weights.copy()
-    # Games counted per unordered pair, so an iteration costs O(pairs), not O(n²): a stage's
-    # history can hold hundreds of players, most of whom met only a few others.
-    if games:
-        g = np.asarray(games, dtype=np.float64).reshape(-1, 3)
-        i, j, score = g[:, 0].astype(np.int64), g[:, 1].astype(np.int64), g[:, 2]
-        wins += np.bincount(i, score, n) + np.bincount(j, 1.0 - score, n)
-        keys, counts = np.unique(np.minimum(i, j) * n + np.maximum(i, j), return_counts=True)
-        pi, pj, counts = keys // n, keys % n, counts.astype(np.float64)
-    else:
-        pi = pj = np.zeros(0, dtype=np.int64)
-        counts = np.zeros(0)
-    centre = float(np.mean(anchors)) if n else 0.0
-    # Strengths relative to the mean anchor stay near 1 (no overflow of 10 ** (r / 400)).
-    anchor_strength = 10.0 ** ((anchors - centre) / 400.0)
-    gamma = anchor_strength.copy()
-    for _ in range(iterations):
-        per_pair = counts / (gamma[pi] + gamma[pj])
-        denom = weights / (gamma + anchor_strength)
-        denom = denom + np.bincount(pi, per_pair, n) + np.bincount(pj, per_pair, n)
-        new = wins / denom  # wins >= half a virtual point, so new > 0
-        converged = np.max(np.abs(np.log(new) - np.log(gamma)), initial=0.0) < tol
-        gamma = new
-        if converged:
-            break
-    return 400.0 * np.log10(gamma) + centre
+__all__ = [
+    "MatchRecord",
+    "MatchStats",
+    "SwissTournament",
+    "TournamentResult",
+    "bradley_terry",
+    "default_rounds",
+    "elo_expected",
+]
 
 
 class SwissTournament:
