@@ -40,7 +40,6 @@ when answered (usable or not), so the run's spend is exact across kills and resu
 from __future__ import annotations
 
 import asyncio
-import email.utils
 import hashlib
 import logging
 import random
@@ -60,9 +59,6 @@ from intuitf.evaluator.compose import ImageFormat, Layout, comparison_images, co
 from intuitf.evaluator.parsing import UnreadableAnswer, parse_answer
 from intuitf.evaluator.pricing import PriceTable
 from intuitf.evaluator.prompts import (
-    FOLLOW_UP_REFUSAL,
-    FOLLOW_UP_TRUNCATED,
-    FOLLOW_UP_UNREADABLE,
     SYSTEM_PROMPT,
     response_format,
     user_prompt,
@@ -76,6 +72,15 @@ from intuitf.evaluator.providers import (
     redact_url,
     require_api_key,
 )
+from intuitf.evaluator.responses import (
+    _RETRYABLE,
+    _follow_up,
+    _hint_for_status,
+    _message,
+    _retry_after,
+    _short,
+    _usage,
+)
 from intuitf.evaluator.types import Aspect, Choice, Cost, Intent, Verdict, combine_answers
 
 log = logging.getLogger(__name__)
@@ -85,8 +90,6 @@ SwapMode = Literal["always", "never", "auto"]
 #: Bump when the prompt or the cached payload changes meaning, so old answers are not reused.
 PROMPT_VERSION = "intuitf-compare-1"
 
-#: HTTP statuses worth retrying: timeouts, conflicts, rate limits, server trouble.
-_RETRYABLE = {408, 409, 425, 429, 500, 502, 503, 504, 520, 522, 524, 529}
 
 #: Rough tokens per image part, for a budget estimate before the first priced answer.
 _IMAGE_TOKENS_GUESS = 800
@@ -585,21 +588,6 @@ class _OutOfTime(Exception):
     """The answer's deadline passed before another attempt could start."""
 
 
-def _follow_up(messages: list[dict], reason: str, answer: str | None) -> list[dict]:
-    """The conversation to send after an unusable answer (see the module notes)."""
-    if reason == "blind":
-        return messages  # the images may not have come through: send them again
-    text = {
-        "refusal": FOLLOW_UP_REFUSAL,
-        "truncated": FOLLOW_UP_TRUNCATED,
-    }.get(reason, FOLLOW_UP_UNREADABLE)
-    return [
-        *messages,
-        {"role": "assistant", "content": (answer or "")[:4000]},
-        {"role": "user", "content": text},
-    ]
-
-
 def _combine(
     results: list[_OrderResult], aspects: list[Aspect]
 ) -> tuple[Choice, float, dict[str, Choice]]:
@@ -612,61 +600,3 @@ def _content_order(first: np.ndarray, second: np.ndarray) -> bool:
     da = hashlib.sha256(np.ascontiguousarray(first).tobytes()).digest()
     db = hashlib.sha256(np.ascontiguousarray(second).tobytes()).digest()
     return db < da
-
-
-def _usage(resp: Any) -> tuple[int, int]:
-    u = getattr(resp, "usage", None)
-    if u is None:
-        return 0, 0
-    return int(getattr(u, "prompt_tokens", 0) or 0), int(getattr(u, "completion_tokens", 0) or 0)
-
-
-def _message(resp: Any) -> tuple[str | None, str | None, str | None]:
-    choices = getattr(resp, "choices", None) or []
-    if not choices:
-        return None, None, None
-    msg = choices[0].message
-    return getattr(msg, "content", None), getattr(msg, "refusal", None), choices[0].finish_reason
-
-
-def _retry_after(response: Any) -> float | None:
-    """Seconds to wait from ``retry-after-ms`` or ``Retry-After`` (seconds or an HTTP date)."""
-    headers = getattr(response, "headers", None)
-    if headers is None:
-        return None
-    ms = headers.get("retry-after-ms")
-    if ms:
-        try:
-            return max(0.0, float(ms) / 1000.0)
-        except ValueError:
-            pass
-    ra = headers.get("retry-after")
-    if not ra:
-        return None
-    try:
-        return max(0.0, float(ra))
-    except ValueError:
-        pass
-    try:
-        when = email.utils.parsedate_to_datetime(ra)
-    except (TypeError, ValueError):
-        return None
-    return max(0.0, when.timestamp() - time.time())
-
-
-def _short(exc: openai.APIStatusError) -> str:
-    body = getattr(exc, "body", None)
-    if isinstance(body, dict):
-        err = body.get("error", body)
-        msg = err.get("message") if isinstance(err, dict) else None
-        if msg:
-            return str(msg)[:200]
-    return str(exc.message)[:200]
-
-
-def _hint_for_status(status: int, provider: str) -> str:
-    if status in (401, 403):
-        return f"Check the API key for {provider} (environment variable or config file)."
-    if status == 404:
-        return "Check the model name and the server's base URL."
-    return "Check the judge's options and the server's documentation; then resume the run."
