@@ -191,3 +191,19 @@ def test_real_tooth_and_engine():
     assert h["enamel"].center == pytest.approx(0.92, abs=0.03)
     assert h["dentin"].center == pytest.approx(0.64, abs=0.03)
     assert 0.45 < h["outline"].center < 0.55
+
+
+def test_the_background_stays_hidden_unless_the_words_name_air():
+    rng = np.random.default_rng(1)
+    data = rng.normal(0.03, 0.01, (24, 24, 24))
+    data[6:18, 6:18, 6:18] = rng.normal(0.4, 0.02, (12, 12, 12))
+    data[10:14, 10:14, 10:14] = rng.normal(0.8, 0.02, (4, 4, 4))
+    vol = Volume.from_array(data.clip(0, 1).astype(np.float32), value_range=(0.0, 1.0))
+    hints = as_hints(
+        explorer_hints(Intent(kind="text", text="opaque white bone, faint red skin"), vol)
+    )
+    bg = [h for h in hints if h.name == "background"]
+    assert len(bg) == 1 and bg[0].hidden and bg[0].reaches(0.03)
+    assert not any(bg[0].reaches(h.center) for h in hints if h.name != "background")
+    with_air = explorer_hints(Intent(kind="text", text="blue air, white bone"), vol)
+    assert not any(h["name"] == "background" for h in with_air)

@@ -569,6 +569,30 @@ def _edit_hint(text: str) -> MaterialHint:
 
 
 def explorer_hints(intent: Intent, volume=None) -> list[dict]:
-    """The hints the Explorer takes for ``intent`` on ``volume`` (empty: none understood)."""
+    """The hints the Explorer takes for ``intent`` on ``volume`` (empty: none understood).
+
+    With placed hints, the background's values get one more: hidden, unless the words name
+    air. Nobody asks for the empty space around the object to be painted, and a faint
+    Gaussian there is a veil over the whole volume box.
+    """
     th = intent_hints(intent, volume)
-    return [h.to_explorer() for h in th.hints if h.center is not None or intent.kind == "edit"]
+    out = [h.to_explorer() for h in th.hints if h.center is not None or intent.kind == "edit"]
+    placed = [h for h in th.hints if h.center is not None]
+    if placed and volume is not None and not any(h.role == "air" for h in placed):
+        counts, _ = volume.histogram()
+        layout = _Layout.of(np.asarray(counts, dtype=np.float64), _materials(counts))
+        top = min(layout.cutoff, min(h.center - 2.5 * h.spread for h in placed))
+        if top > layout.background + 0.01:
+            # Reaches (2.5 spreads) from the background's mode up to just below the cutoff.
+            spread = (top - layout.background) / 2.5
+            out.append(
+                {"name": "background", "center": layout.background, "spread": spread,
+                 "color": None, "height": None, "hidden": True}
+            )  # fmt: skip
+    return out
+
+
+def _materials(counts):
+    from intuitf.tf.defaults import find_materials
+
+    return find_materials(np.asarray(counts, dtype=np.float64).ravel(), max_materials=6)

@@ -142,7 +142,10 @@ def hinted_tf(
     way, but remains one toggle from view.
     """
     color = color or bounds.sample_color
-    placed = [h for h in hints if h.center is not None]
+    # A hidden material needs no Gaussian (not showing it is the point); it still keeps
+    # the leftover Gaussians away and pulls mutations there to height 0.
+    avoid = [h for h in hints if h.center is not None]
+    placed = [h for h in avoid if not h.hidden]
     if len(placed) > n_gaussians:
         pick = sorted(int(i) for i in rng.choice(len(placed), size=n_gaussians, replace=False))
         placed = [placed[i] for i in pick]
@@ -156,7 +159,7 @@ def hinted_tf(
         height = 0.0 if h.hidden else sample_hint_height(rng, band, bounds)
         rgb = bounds.sample_palette_color(rng, [h.color]) if h.color else color(rng)
         gs.append(Gaussian(mean, width, height, rgb))
-    others = [m for m in materials if all(not h.reaches(m.center) for h in placed)]
+    others = [m for m in materials if all(not h.reaches(m.center) for h in avoid)]
     order = list(rng.permutation(len(others))) if others else []
     while len(gs) < n_gaussians:
         if order:
@@ -166,7 +169,7 @@ def hinted_tf(
             # Anywhere but on a hinted material (that one is already as the words say).
             for _ in range(10):
                 mean = float(rng.uniform(*bounds.mean))
-                if not any(h.reaches(mean) for h in placed):
+                if not any(h.reaches(mean) for h in avoid):
                     break
             width = bounds.sample_width(rng)
         if rng.random() < hide_prob:
