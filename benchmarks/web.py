@@ -16,7 +16,8 @@ Measured, all while the run is going (and again with no run, for comparison):
 - event delivery: the event's own time (set when the run emitted it) to its receipt here.
 
 The "server" column is the frame header's ``ms``: the server's own time from the parsed request
-to the encoded picture (waiting for the render worker included), without the socket.
+to the encoded picture, without the socket; "wait" of it waiting for the render worker (behind
+a tournament render), "render" the render itself (medians).
 
 Targets on the 2-core reference machine: drag median < 50 ms, full still < 150 ms, events
 < 200 ms, all while a run is going.
@@ -101,6 +102,8 @@ def frames(ws_url: str, target: dict, quality: str, n: int, shaded: bool = True)
     """Round-trip times (ms) of ``n`` requests, each sent when the previous frame arrived,
     and the server's own times (the headers' ``ms``)."""
     server_ms: list[float] = []
+    waits: list[float] = []
+    renders: list[float] = []
     sides: list[int] = []
     from websockets.sync.client import connect
 
@@ -119,9 +122,11 @@ def frames(ws_url: str, target: dict, quality: str, n: int, shaded: bool = True)
             if i:  # the first frame warms the socket and the target up
                 out.append((time.perf_counter() - t) * 1000.0)
                 server_ms.append(float(head["ms"]))
+                waits.append(float(head.get("wait_ms", 0.0)))
+                renders.append(float(head.get("render_ms", 0.0)))
                 sides.append(int(head["width"]))
     SIDES[quality] = SIDES.get(quality, []) + [sides]
-    return out, server_ms
+    return out, server_ms, waits, renders
 
 
 def main() -> None:
@@ -228,27 +233,29 @@ def main() -> None:
             server.kill()
 
     def row(what, values, target_ms):
-        values, server_ms = values if isinstance(values, tuple) else (values, None)
+        extra = ""
+        if isinstance(values, tuple):
+            values, server_ms, waits, renders = values
+            extra = "".join(f"{statistics.median(v):>9.1f}" for v in (server_ms, waits, renders))
         med, p90 = statistics.median(values), pct(values, 0.9)
         ok = "" if target_ms is None else ("yes" if med < target_ms else "NO")
         t = "" if target_ms is None else f"< {target_ms:.0f}"
-        own = f"{statistics.median(server_ms):>9.1f}" if server_ms else f"{'':>9}"
-        print(f"{what:<52}{len(values):>5}{med:>9.1f}{p90:>9.1f}{max(values):>9.1f}{own}"
-              f"{t:>9}{ok:>6}")  # fmt: skip
+        print(f"{what:<44}{len(values):>4}{med:>8.1f}{p90:>8.1f}{max(values):>8.1f}"
+              f"{t:>7}{ok:>5}{extra}")  # fmt: skip
 
     print()
     print(f"volume {args.volume}; run: population {args.population}, image {args.image_size}², "
           f"metric judge; {os.cpu_count()} cores; load average at the end "
           f"{os.getloadavg()[0]:.1f} (before the start {load_before:.1f})")  # fmt: skip
-    print(f"{'measure (ms)':<52}{'n':>5}{'median':>9}{'p90':>9}{'max':>9}{'server':>9}"
-          f"{'target':>9}{'met':>6}")  # fmt: skip
+    print(f"{'measure (ms)':<44}{'n':>4}{'median':>8}{'p90':>8}{'max':>8}{'target':>7}"
+          f"{'met':>5}{'server':>9}{'wait':>9}{'render':>9}")  # fmt: skip
     row("drag frame JPEG, run going", busy_drag, 50)
     row("full still 256² shaded PNG, run going", busy_full, 150)
     row("drag frame JPEG, same TF, no run", idle_drag, None)
     row("full still 256² shaded PNG, same TF, no run", idle_full, None)
     row("event delivery (event time -> receipt)", delays, 200)
-    print(f"{'first gallery update (POST /api/runs -> gen 0 ended)':<52}{1:>5}"
-          f"{first_gallery * 1000:>9.0f}")  # fmt: skip
+    print(f"{'first gallery update (POST -> gen 0 ended)':<44}{1:>4}"
+          f"{first_gallery * 1000:>8.0f}")  # fmt: skip
     for label, runs_ in (("run going", SIDES["drag"][1]), ("no run", SIDES["drag"][2])):
         counts = {side: runs_.count(side) for side in sorted(set(runs_), reverse=True)}
         print(f"drag frame sides, {label}: " + ", ".join(f"{k}²×{v}" for k, v in counts.items()))

@@ -5,7 +5,8 @@ The page sends a request whenever the camera (or TF, size, shading) changes::
     {req, target: {candidate: "RUN/gGGG-NNN"} | {volume: ID, tf: TF JSON},
      camera, size, shaded, background, quality: "drag" | "full", highlight?: [indices]}
 
-and gets back a text header ``{req, width, height, format, ms, quality}`` followed at once by
+and gets back a text header ``{req, width, height, format, ms, quality, wait_ms, render_ms}``
+(``ms`` in all, of which ``wait_ms`` waiting for the render worker) followed at once by
 one binary message with the picture (JPEG for ``drag`` at half size, at most 128 pixels; PNG
 for ``full``). One frame is in flight per socket: a request that arrives while a frame
 renders waits in a single slot, replacing any request already waiting there, so a fast drag
@@ -165,21 +166,15 @@ class ViewSocket:
         if quality == "drag":
             size = self._drag_size(min(DRAG_MAX, max(16, size // 2)))
             drag = self.web.drag_renderer(volume, bg, size, shaded)
-
-            def render_drag():
-                t = time.perf_counter()
-                out = render_rgb8(drag, tf, camera)
-                return out, (time.perf_counter() - t) * 1000.0
-
-            image, ms = await render_scheduler().run(render_drag, INTERACTIVE)
+            image, wait, ms = await _on_worker(lambda: render_rgb8(drag, tf, camera))
             per_px = ms / (size * size)
             self._ms_per_px = (
                 per_px if self._ms_per_px is None else (0.5 * self._ms_per_px + 0.5 * per_px)
             )
             data, fmt = await asyncio.to_thread(encode_jpeg, image), "jpeg"
         else:
-            image = await render_scheduler().run(
-                lambda: _full(vr, tf, camera, size, shaded, highlight), INTERACTIVE
+            image, wait, ms = await _on_worker(
+                lambda: _full(vr, tf, camera, size, shaded, highlight)
             )
             data, fmt = await asyncio.to_thread(encode_png, image), "png"
         header = {
@@ -189,8 +184,23 @@ class ViewSocket:
             "format": fmt,
             "ms": round((time.perf_counter() - t0) * 1000.0, 1),
             "quality": quality,
+            "wait_ms": round(wait, 1),
+            "render_ms": round(ms, 1),
         }
         return header, data
+
+
+async def _on_worker(fn):
+    """``fn()`` on the render worker at interactive priority: (result, ms waited for the
+    worker, ms it took)."""
+    submitted = time.perf_counter()
+
+    def job():
+        start = time.perf_counter()
+        out = fn()
+        return out, (start - submitted) * 1000.0, (time.perf_counter() - start) * 1000.0
+
+    return await render_scheduler().run(job, INTERACTIVE)
 
 
 def _full(vr, tf, camera, size: int, shaded: bool, highlight: list[int]):
