@@ -234,7 +234,7 @@ class LiveRun:
             return False
 
 
-def _lower_priority(niceness: int = 5) -> None:
+def _lower_priority(niceness: int = 10) -> None:
     """Let this thread (a run's judging and bookkeeping) yield the CPU to the server's own
     threads, so that views stay responsive while runs go (Linux: per-thread nice value)."""
     try:
