@@ -171,7 +171,8 @@ class ViewSocket:
             self._ms_per_px = (
                 per_px if self._ms_per_px is None else (0.5 * self._ms_per_px + 0.5 * per_px)
             )
-            data, fmt = await asyncio.to_thread(encode_jpeg, image), "jpeg"
+            # A JPEG of at most 128² takes well under a millisecond: no thread hop for it.
+            data, fmt = encode_jpeg(image), "jpeg"
         else:
             image, wait, ms = await _on_worker(
                 lambda: _full(vr, tf, camera, size, shaded, highlight)
