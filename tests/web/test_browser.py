@@ -60,12 +60,16 @@ def wait_full_frame(page, after: int = 0, timeout: float = 60_000) -> int:
 
 def wait_run_done(page, web_server, name: str) -> dict:
     detail = web_server.wait_run(name)
-    page.wait_for_function(
-        "name => { const d = window.intuitfDebug.state.runDetail;"
-        " return d && d.info.name === name && d.info.status !== 'running'; }",
-        arg=name,
-        timeout=30_000,
-    )
+    try:
+        page.wait_for_function(
+            "name => { const d = window.intuitfDebug.state.runDetail;"
+            " return d && d.info.name === name && d.info.status !== 'running'; }",
+            arg=name,
+            timeout=30_000,
+        )
+    except Exception:
+        d = page.evaluate("JSON.stringify(window.intuitfDebug.state.runDetail)")
+        raise AssertionError(f"the page still shows {d} (API: {detail})") from None
     return detail
 
 
@@ -109,8 +113,27 @@ def show_run(page, run: str) -> None:
         tab.click()
     page.click(f".run-node[data-run='{run}'] > .run-head")
     page.wait_for_function(
-        "run => (window.intuitfDebug.state.current || '').startsWith(run + '/')", arg=run
+        "run => { const s = window.intuitfDebug.state;"
+        " return (s.current || '').startsWith(run + '/') && s.candidate && s.candidate.qid === s.current; }",
+        arg=run,
     )
+
+
+def start_new_run(page) -> str:
+    """Press Start; wait for the new run to be current and its first results in the gallery."""
+    before = current_run(page)
+    page.click("#q-start")
+    try:
+        page.wait_for_function(
+            "run => { const r = window.intuitfDebug.state.run; return r && r !== run; }",
+            arg=before,
+            timeout=60_000,
+        )
+    except Exception:
+        raise AssertionError(f"no new run; the page says {messages(page)}") from None
+    run = current_run(page)
+    page.wait_for_selector(f"#gallery-grid .card[data-qid^='{run}/']", timeout=FIRST_GALLERY_S)
+    return run
 
 
 def images_loaded(page, selector: str) -> None:
@@ -153,10 +176,7 @@ def test_case_study_text_query_select_refine_branch_overrule(page, web_server, s
     # 1. A text query starts a run; the gallery and the history fill as generations end.
     page.fill("#q-text", "opaque ivory bone, faint red skin")
     open_settings(page)
-    page.click("#q-start")
-    page.wait_for_selector("#gallery-grid .card", timeout=FIRST_GALLERY_S)
-    run = current_run(page)
-    assert run
+    run = start_new_run(page)
     page.wait_for_selector(f".run-node[data-run='{run}'] .gen[data-generation='0'] img.thumb")
     assert page.inner_text("#progress").startswith(run)
     wait_run_done(page, web_server, run)
@@ -245,12 +265,20 @@ def test_case_study_text_query_select_refine_branch_overrule(page, web_server, s
     assert any("preferred" in m for m in messages(page))
     matches = web_server.api("GET", f"/api/runs/{run}/matches?generation=1")
     assert any(m.get("source") == "human" for m in matches)
-    page.click("[data-testid=undo]")
-    page.wait_for_function(
+    same_order = (
         "order => { const o = [...document.querySelectorAll('#gallery-grid .card')].map(c => c.dataset.qid);"
-        " return JSON.stringify(o) === JSON.stringify(order); }",
-        arg=order,
+        " return JSON.stringify(o) === JSON.stringify(order); }"
     )
+    page.click("[data-testid=undo]")
+    page.wait_for_function(same_order, arg=order)
+    # "Worst of these": the best-ranked of the two marked is the worst, then undone too.
+    page.click("[data-testid=worst]")
+    page.wait_for_function(
+        "a => [...document.querySelectorAll('#gallery-grid .card')].map(c => c.dataset.qid).indexOf(a) !== 0",
+        arg=first,
+    )
+    page.click("[data-testid=undo]")
+    page.wait_for_function(same_order, arg=order)
 
 
 def test_sketch_on_the_rendering_and_start(page, web_server, shots):
@@ -386,7 +414,7 @@ def test_camera_drag_wheel_and_controls(page, web_server):
     assert cam3["zoom"] == 1 and cam3["pan"] == [0, 0]
 
 
-def test_hand_edit_becomes_a_history_point(page, web_server):
+def test_hand_edit_becomes_a_history_point(page, web_server, shots):
     run = web_server.start_run("gold bone")
     web_server.wait_run(run)
     page.reload()
@@ -411,6 +439,7 @@ def test_hand_edit_becomes_a_history_point(page, web_server):
     draft = page.evaluate("window.intuitfDebug.state.draft")
     assert draft["gaussians"][0]["color"] == [0, 1, 0]
     wait_full_frame(page)  # the view follows the draft
+    shot(page, shots, "hand-edit")
     page.click("#edit-keep")
     page.wait_for_function("p => window.intuitfDebug.state.current && window.intuitfDebug.state.current !== p", arg=parent)
     qid = current(page)
@@ -451,9 +480,7 @@ def test_fake_model_server_as_the_evaluator(page, web_server, shots):
     with FakeMLLMServer(target=target) as srv:
         page.fill("#q-text", "a red head")
         open_settings(page, evaluator=srv.base_url)
-        page.click("#q-start")
-        page.wait_for_selector("#gallery-grid .card", timeout=FIRST_GALLERY_S)
-        run = current_run(page)
+        run = start_new_run(page)
         detail = wait_run_done(page, web_server, run)
         assert detail["info"]["status"] == "completed"
         assert srv.stats.requests > 0
@@ -497,3 +524,40 @@ def test_model_server_down_is_a_message(page, web_server):
     page.wait_for_selector("[data-testid=message].toast-error, [data-testid=message].toast-warn", timeout=60_000)
     assert page.locator("#history-tree .run-node").count() >= 1  # the page still works
     page.click("#query .seg-kind button[data-kind=text]")
+
+
+def test_pause_resume_stop_continue_and_a_new_stage(page, web_server, shots):
+    page.fill("#q-text", "opaque ivory bone")
+    open_settings(page, population="8", generations="8")
+    run = start_new_run(page)
+    # Live progress while it runs: stage, generations, matches judged of the generation.
+    page.wait_for_selector("#progress .kv.matches")
+    assert "generations" in page.inner_text("#progress")
+    shot(page, shots, "running")
+    status = "[data-testid=run-status]"
+    page.click("#run-pause")
+    page.wait_for_function(f"() => document.querySelector('{status}').textContent === 'paused'")
+    assert page.inner_text("#run-pause") == "Resume"
+    page.click("#run-pause")
+    page.wait_for_function(f"() => document.querySelector('{status}').textContent === 'running'")
+    page.click("#run-stop")
+    detail = wait_run_done(page, web_server, run)
+    assert detail["info"]["status"] == "cancelled"
+    done = detail["info"]["generations_done"]
+    assert done < 8
+    # Resume it where it stopped; then a new customize stage of the same run.
+    page.wait_for_selector("#run-continue:not([hidden])")
+    page.click("#run-continue")
+    page.wait_for_function(f"() => document.querySelector('{status}').textContent === 'running'")
+    detail = wait_run_done(page, web_server, run)
+    assert detail["info"]["status"] == "completed" and detail["info"]["generations_done"] == 8
+    page.click("#query .seg-mode button[data-mode=continue]")
+    page.fill("#q-text", "golden bone")
+    page.fill("#q-generations", "1")
+    assert "Continue" in page.inner_text("#q-start")
+    page.click("#q-start")
+    page.wait_for_function(
+        "run => window.intuitfDebug.state.runDetail?.info.generations_done === 9", arg=run, timeout=120_000
+    )
+    assert current_run(page) == run
+    page.wait_for_selector(f".run-node[data-run='{run}'] .stage-mark.stage-customize")

@@ -107,6 +107,8 @@ function initTopbar() {
   renderProgress();
 }
 
+let lastModelError = null;
+
 function renderProgress() {
   const box = document.getElementById("progress");
   const d = state.runDetail;
@@ -135,11 +137,21 @@ function renderProgress() {
     el("span.kv", {}, el("span.k", { text: "calls" }), el("span.v", { text: String(p.calls ?? (d.info.cost || {}).calls ?? 0) })),
     el("span.kv", {}, el("span.k", { text: "cost" }), el("span.v", { text: fmtUsd(p.usd ?? (d.info.cost || {}).usd ?? 0) })),
     live ? el("span.kv", { title: "estimated time left" }, el("span.k", { text: "left" }), el("span.v", { text: fmtSeconds(p.seconds_left) })) : null,
+    p.last_error
+      ? el("span.badge.warn", { text: "model error", title: p.last_error, "data-testid": "model-error" })
+      : null,
     state.live && state.live.run === d.info.name && !state.live.connected && status === "running"
       ? el("span.badge.warn", { text: "reconnecting", title: "The event stream dropped; it reconnects by itself." })
       : null,
   ];
   box.replaceChildren(...parts.filter(Boolean));
+  if (p.last_error && p.last_error !== lastModelError) {
+    lastModelError = p.last_error;
+    showMessage(`The model server: ${p.last_error}`, {
+      kind: "warn",
+      hint: "Matches it cannot answer stay undecided; check the server, its key or its address.",
+    });
+  }
 }
 
 // -- export ------------------------------------------------------------------------------------------

@@ -4,7 +4,7 @@
 
 import * as api from "./api.js";
 import { showError } from "./messages.js";
-import { el, on, rgbToHex, set, splitQid, state } from "./state.js";
+import { el, hexToRgb, on, rgbToHex, set, splitQid, state } from "./state.js";
 
 const TILE = 128;
 
@@ -20,7 +20,7 @@ export function initFeatures() {
   note = document.getElementById("features-note");
   clearBtn = document.getElementById("features-clear");
   clearBtn.addEventListener("click", () => set({ selected: new Set() }));
-  on(["candidate", "viewSettled", "shaded"], schedule);
+  on(["candidate", "viewSettled", "shaded", "background"], schedule);
   on(["selected"], markSelection);
   render([]);
 }
@@ -39,7 +39,12 @@ async function load() {
     return;
   }
   const camera = (state.viewSettled && state.viewSettled.camera) || null;
-  const body = { camera: camera || { azimuth: 0, elevation: 0, zoom: 1, pan: [0, 0] }, size: TILE, shaded: state.shaded };
+  const body = {
+    camera: camera || { azimuth: 0, elevation: 0, zoom: 1, pan: [0, 0] },
+    size: TILE,
+    shaded: state.shaded,
+    background: hexToRgb(state.background),
+  };
   const key = JSON.stringify([state.current, body]);
   if (key === shownKey) return;
   const my = ++ticket;

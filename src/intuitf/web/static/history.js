@@ -55,6 +55,14 @@ function render() {
     ),
   );
 
+  const activeTab = tabsEl.querySelector('.tab[aria-selected="true"]');
+  if (activeTab) {
+    // Keep the open tab in sight when the tabs take more rows than the bar shows.
+    const top = activeTab.offsetTop; // .tabs is positioned: relative to it
+    if (top < tabsEl.scrollTop || top + activeTab.offsetHeight > tabsEl.scrollTop + tabsEl.clientHeight) {
+      tabsEl.scrollTop = top - 4;
+    }
+  }
   const scroll = treeEl.scrollTop;
   if (!root) {
     treeEl.replaceChildren(

@@ -115,7 +115,7 @@ export function round(x, digits) {
 export function shownTF() {
   if (state.draft) return state.draft;
   if (state.candidate) return state.candidate.tf;
-  if (!state.current && state.histogram && state.histogram.volume === state.volumeId) {
+  if (!state.run && !state.current && state.histogram && state.histogram.volume === state.volumeId) {
     return defaultTF(state.histogram.materials); // the preview of a volume before any run
   }
   return null;

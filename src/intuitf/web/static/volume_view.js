@@ -78,7 +78,7 @@ export function initVolumeView() {
   new ResizeObserver(() => resize()).observe(stage);
   resize();
 
-  on(["current", "candidate", "draft", "shaded", "background", "selected", "volumeId", "histogram"], () =>
+  on(["run", "current", "candidate", "draft", "shaded", "background", "selected", "volumeId", "histogram"], () =>
     frame(state.draftDragging ? "drag" : "full"),
   );
   on("camera", () => frame("full"));
@@ -146,7 +146,7 @@ function target() {
   }
   if (state.current) return { candidate: state.current };
   // No run yet: the chosen volume with a TF on its histogram's materials, to look at first.
-  if (state.volumeId && state.histogram && state.histogram.volume === state.volumeId) {
+  if (!state.run && state.volumeId && state.histogram && state.histogram.volume === state.volumeId) {
     return { volume: state.volumeId, tf: defaultTF(state.histogram.materials) };
   }
   return null;
@@ -159,6 +159,9 @@ export function frame(quality = "full") {
   if (!t) {
     ctx.clearRect(0, 0, canvas.width, canvas.height);
     stage.classList.add("empty");
+    stage.querySelector(".view-empty").textContent = state.run
+      ? `${state.run}: the first results appear here when its first generation ends.`
+      : "Choose a volume or start a run to see a rendering here.";
     return;
   }
   stage.classList.remove("empty");
@@ -208,7 +211,9 @@ function updateTitle() {
     ? `Editing ${state.current || "a new TF"} by hand`
     : cur
       ? `${cur.run} / ${cur.cid}`
-      : state.volumeId
+      : state.run
+        ? `${state.run} (no result yet)`
+        : state.volumeId
         ? `${state.volumeId} · preview on its histogram's materials`
         : "nothing to show yet";
 }
@@ -294,6 +299,7 @@ async function pickAt(e, add) {
       y,
       size: viewSize,
       shaded: state.shaded,
+      background: hexToRgb(state.background), // the still's background: one sample cache for both
     });
     if (state.current !== `${cur.run}/${cur.cid}`) return;
     state.follow = false;
