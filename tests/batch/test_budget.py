@@ -124,3 +124,28 @@ def test_model_judges_of_several_runs_share_one_limit(tmp_path):
     t = ledger.totals()
     assert (t.paid_calls, t.in_flight) == (9, 0) and t.paid_usd > 0
     assert sum(ledger.per_volume().values()) == 9
+
+
+def test_a_workers_limiter_holds_requests_in_flight_and_per_second():
+    from intuitf.batch.runner import JudgeLimiter, ThrottledJudge
+
+    imgs = _images(10)
+    q = aspects_for("quality")
+    with FakeMLLMServer(target=imgs[0], latency=0.1) as srv:
+        limiter = JudgeLimiter(max_in_flight=2, rate_per_s=20.0)
+        judges = [
+            ThrottledJudge(MLLMJudge("default", base_url=srv.base_url, swap="never"), limiter)
+            for _ in range(2)
+        ]
+
+        async def main():
+            t0 = asyncio.get_running_loop().time()
+            await asyncio.gather(
+                *(judges[i % 2].compare(imgs[i], imgs[i + 1], q, Intent()) for i in range(8))
+            )
+            return asyncio.get_running_loop().time() - t0
+
+        elapsed = asyncio.run(main())
+        assert srv.stats.requests == 8
+        assert srv.stats.max_in_flight <= 2  # both runs' judges share the worker's limit
+    assert elapsed >= 7 / 20.0 and elapsed >= 4 * 0.1

@@ -8,7 +8,7 @@ waiting for a model. The driver hands each worker a new volume whenever it has r
 **Each volume** gets its own run folder ``DIR/runs/KEY`` driven through
 :meth:`Session.open` (new) or :meth:`Session.resume` (unfinished), whose lock keeps it to one
 process. Its first population holds the reference TF carried to this volume
-(:mod:`intuitf.batch.transfer`). Its judge checks the batch's shared budget before every call
+(:mod:`intuitf.batch.transfer`), or the volume's default TF when there is none to carry. Its judge checks the batch's shared budget before every call
 (:class:`~intuitf.batch.budget.SharedBudget`) and, with a rate limit, waits for its turn
 (:class:`JudgeLimiter`). When it ends, its result (status, similarity of its best rendering to
 the reference picture, calls, cost, time) is written to ``DIR/results/KEY.json``.
@@ -44,7 +44,7 @@ log = logging.getLogger(__name__)
 
 #: Statuses a volume can end a batch pass with.
 FINISHED = "completed"
-RAY_HINT = 'Install Ray with: pip install "intuitf[ray]"  (or: pip install ray)'
+RAY_HINT = 'pip install "intuitf[ray]" (or pip install ray)'
 
 
 @dataclass
@@ -118,6 +118,8 @@ def _base_result(item: VolumeItem) -> dict:
         "seconds": 0.0,
         "render_s": 0.0,
         "judge_s": 0.0,
+        "open_s": 0.0,
+        "outputs_s": 0.0,
         "similarity": None,
         "start_similarity": None,
         "best_png": None,
@@ -245,7 +247,7 @@ class WorkerCore:
         t0 = time.perf_counter()
         prev = read_result(self.root, item.key) or {}
         result = {**_base_result(item), **{k: prev[k] for k in prev if k in ("seconds",
-                  "render_s", "judge_s", "attempts", "start_similarity")}}  # fmt: skip
+                  "render_s", "judge_s", "open_s", "outputs_s", "attempts", "start_similarity")}}  # fmt: skip
         result["attempts"] = int(result.get("attempts") or 0)
         try:
             result = await self._run(item, result)
@@ -278,11 +280,14 @@ class WorkerCore:
             return {**result, "status": status,
                     "message": "The batch's budget was spent before this volume's turn."}  # fmt: skip
         result["attempts"] += 1
+        t_open = time.perf_counter()
         if (rd / "run.json").exists():
             session = await asyncio.to_thread(Session.resume, rd)
         else:
             session, start_sim = await asyncio.to_thread(self._open, item, rd)
             result["start_similarity"] = start_sim
+        open_s = time.perf_counter() - t_open
+        outputs_s = 0.0
         self.active[item.key] = session
         try:
             if self.ledger is not None:
@@ -294,8 +299,18 @@ class WorkerCore:
             timing = _Timing(session)
             if self.stopping:
                 session.cancel()
-            outcome = await session.arun()
+            # The outputs (best renderings, plots, exports, report) are written on a thread,
+            # so that the worker's other runs keep asking the judge meanwhile.
+            outcome = await session.arun(write_outputs=False)
             timing.unsubscribe()
+            if session.last_ranking:
+                t_out = time.perf_counter()
+                try:
+                    await asyncio.to_thread(session.write_outputs)
+                    outputs_s = time.perf_counter() - t_out
+                except IntuitfError as exc:  # e.g. a full disk: the run itself is kept
+                    outcome.reason = "storage"
+                    outcome.message = f"{outcome.message} Saving outputs failed: {exc}"
         finally:
             self.active.pop(item.key, None)
             await session.aclose()
@@ -310,6 +325,8 @@ class WorkerCore:
             cost_usd=float(c.usd),
             render_s=float(result.get("render_s") or 0.0) + timing.render_s,
             judge_s=float(result.get("judge_s") or 0.0) + timing.judge_s,
+            open_s=float(result.get("open_s") or 0.0) + open_s,
+            outputs_s=float(result.get("outputs_s") or 0.0) + outputs_s,
             run_seconds=float(c.seconds),
         )
         best_png, best_tf = rd / "best" / "rank01.png", rd / "best" / "rank01.tf.json"
@@ -325,21 +342,23 @@ class WorkerCore:
         """Read the volume, carry the reference TF to it, and open its run (a worker thread)."""
         from intuitf.batch.transfer import transfer_tf
         from intuitf.session import Session
+        from intuitf.tf.defaults import default_tf
         from intuitf.volume import load_volume
 
         vol = load_volume(item.source, **self.config.reader)
-        initial = []
         ref = self.reference
+        counts, _ = vol.histogram()
         if self.config.carry and ref.tf is not None:
-            counts, _ = vol.histogram()
-            carried, _ = transfer_tf(
+            start, _ = transfer_tf(
                 ref.tf,
                 counts,
                 ref_counts=ref.counts,
                 ref_range=ref.value_range,
                 target_range=tuple(vol.value_range),
             )
-            initial.append(carried.to_dict())
+        else:  # no TF to carry (a picture), or --no-carry: the volume's own default TF
+            start = default_tf(counts, tuple(vol.value_range))
+        initial = [start.to_dict()]
         spec = {
             **self.config.template,
             "name": item.key,
@@ -347,15 +366,11 @@ class WorkerCore:
             "initial": initial,
         }
         session = Session.open(spec, rd, volume=vol)
-        start = None
-        if initial:
-            try:
-                from intuitf.tf import GaussianTF
-
-                start = ref.similarity(session.render(GaussianTF.from_dict(initial[0])))
-            except Exception:  # noqa: BLE001 - a figure for the report, never a failure
-                start = None
-        return session, start
+        try:
+            start_sim = ref.similarity(session.render(start))
+        except Exception:  # noqa: BLE001 - a figure for the report, never a failure
+            start_sim = None
+        return session, start_sim
 
 
 def _message(exc: BaseException) -> str:
@@ -534,7 +549,7 @@ def import_ray():
     try:
         import ray
     except ImportError:
-        raise IntuitfError("--ray needs Ray, which is not installed.", RAY_HINT) from None
+        raise IntuitfError(f"--ray needs Ray, which is not installed: {RAY_HINT}.") from None
     return ray
 
 

@@ -2,7 +2,7 @@
 
 Per volume: status, the similarity of its best rendering to the reference picture (colour
 distribution of the rendered materials, see :meth:`Reference.similarity`), and before the
-search (the carried TF as it came), calls, cost, time and how that time split between rendering
+search (the TF the run started from: the reference TF carried over, or the volume's default), calls, cost, time and how that time split between rendering
 and waiting for the judge. A volume is *flagged* when it did not finish or its best stays far
 from the reference (similarity below ``flag_below``): those are the scans to look at.
 """
@@ -79,6 +79,8 @@ def build_summary(
         "volume_seconds": sum(float(v.get("seconds") or 0.0) for v in volumes),
         "render_s": sum(float(v.get("render_s") or 0.0) for v in volumes),
         "judge_s": sum(float(v.get("judge_s") or 0.0) for v in volumes),
+        "open_s": sum(float(v.get("open_s") or 0.0) for v in volumes),
+        "outputs_s": sum(float(v.get("outputs_s") or 0.0) for v in volumes),
         "mean_similarity": float(np.mean(sims)) if sims else None,
     }
     if wall_s:
@@ -219,32 +221,37 @@ ${t["cost_usd"]:.4f}. {html.escape(budget_line)}</p>
 </table>
 <p><small>Similarity: colour distribution of the rendered materials against the reference picture
 (intersection of CIELAB histograms minus mean-colour distance / 100; 1 = same colours in the
-same shares). "Before search": the reference TF carried to the volume, as it came.</small></p>
+same shares). "Before search": the TF the run started from (the reference TF carried to the volume, or the
+volume's default TF), before any search.</small></p>
 </body></html>
 """
 
 
 def summary_table(summary: dict):
-    """A Rich table of the batch, one row per volume."""
+    """A Rich table of the batch, one row per volume (flagged rows in red, marked "!")."""
     from rich.table import Table
 
-    table = Table(title="Batch", show_lines=False)
-    for col, just in (("volume", "left"), ("status", "left"), ("similarity", "right"),
-                      ("before", "right"), ("calls", "right"), ("cost", "right"),
-                      ("time", "right"), ("render/judge", "right"), ("", "left")):  # fmt: skip
-        table.add_column(col, justify=just)  # type: ignore[arg-type]
+    table = Table(title="Batch", show_lines=False, pad_edge=False)
+    table.add_column("volume", overflow="fold")
+    table.add_column("status")
+    table.add_column("sim", justify="right")
+    table.add_column("start", justify="right")
+    table.add_column("calls", justify="right")
+    table.add_column("$", justify="right")
+    table.add_column("time s", justify="right")
+    table.add_column("render/judge s", justify="right")
     for v in summary["volumes"]:
-        style = "red" if v.get("flagged") else None
+        flagged = v.get("flagged")
+        status = str(v.get("status")) + (" (before)" if v.get("skipped") else "")
         table.add_row(
-            str(v["key"]),
-            str(v.get("status")) + (" (done before)" if v.get("skipped") else ""),
+            ("! " if flagged else "") + str(v["key"]),
+            status,
             _fmt(v.get("similarity"), ".3f"),
             _fmt(v.get("start_similarity"), ".3f"),
             str(int(v.get("calls") or 0)),
-            f"${_fmt(v.get('cost_usd'), '.4f', '0')}",
-            f"{_fmt(v.get('seconds'), '.1f')} s",
-            f"{_fmt(v.get('render_s'), '.1f')}/{_fmt(v.get('judge_s'), '.1f')} s",
-            "flagged" if v.get("flagged") else "",
-            style=style,
+            _fmt(v.get("cost_usd"), ".4f", "0"),
+            _fmt(v.get("seconds"), ".1f"),
+            f"{_fmt(v.get('render_s'), '.1f')}/{_fmt(v.get('judge_s'), '.1f')}",
+            style="red" if flagged else None,
         )
     return table
