@@ -71,7 +71,9 @@ class WebServer:
             req.add_header("Content-Type", "application/json")
         with urllib.request.urlopen(req, timeout=timeout) as resp:
             raw = resp.read()
-            return json.loads(raw) if raw and "json" in resp.headers.get("Content-Type", "") else raw
+            return (
+                json.loads(raw) if raw and "json" in resp.headers.get("Content-Type", "") else raw
+            )
 
     def wait_run(self, name: str, timeout: float = 180.0) -> dict:
         """The run's detail once it is no longer running."""

@@ -105,7 +105,7 @@ def show_run(page, run: str) -> None:
     """Open the history tab that holds ``run`` and make the run current."""
     page.wait_for_function(
         "run => window.intuitfDebug.state.tree && JSON.stringify(window.intuitfDebug.state.tree)"
-        ".includes(`\"name\":\"${run}\"`)",
+        '.includes(`"name":"${run}"`)',
         arg=run,
     )
     tab = page.locator(f"#history-tabs .tab[data-run='{run}']")
@@ -197,7 +197,9 @@ def test_case_study_text_query_select_refine_branch_overrule(page, web_server, s
     wait_full_frame(page)
     index = click_structure(page)
     page.wait_for_selector(f"#features-strip .feature.selected[data-index='{index}']")
-    page.wait_for_function("() => Number(document.getElementById('mask-canvas').dataset.pixels || 0) > 0")
+    page.wait_for_function(
+        "() => Number(document.getElementById('mask-canvas').dataset.pixels || 0) > 0"
+    )
     assert page.get_attribute("#mask-canvas", "data-index") == str(index)
     assert "Refine 1 feature" in page.inner_text("#q-start")
     shot(page, shots, "selected")
@@ -219,7 +221,9 @@ def test_case_study_text_query_select_refine_branch_overrule(page, web_server, s
     assert info["intent"].get("selected") == [index]
     assert info["parent"]["run"] == run
     wait_run_done(page, web_server, refine_run)
-    page.wait_for_selector(f".run-node[data-run='{run}'] .branches .run-node[data-run='{refine_run}']")
+    page.wait_for_selector(
+        f".run-node[data-run='{run}'] .branches .run-node[data-run='{refine_run}']"
+    )
     refined = web_server.api("GET", f"/api/candidates/{current(page)}")["tf"]["gaussians"]
     before = web_server.api("GET", f"/api/candidates/{parent_qid}")["tf"]["gaussians"]
     assert len(refined) == len(before)
@@ -229,11 +233,15 @@ def test_case_study_text_query_select_refine_branch_overrule(page, web_server, s
 
     # 4. Go back in the history (the first run's first generation) and explore from there.
     page.click(f".run-node[data-run='{run}'] > ol > .gen[data-generation='0'] > .gen-point")
-    page.wait_for_function("run => (window.intuitfDebug.state.current || '').startsWith(run + '/g000-')", arg=run)
+    page.wait_for_function(
+        "run => (window.intuitfDebug.state.current || '').startsWith(run + '/g000-')", arg=run
+    )
     g0 = current(page)
     page.fill("#q-text", "")
     page.click("#branch-btn")
-    page.wait_for_function("names => !names.includes(window.intuitfDebug.state.run)", arg=[run, refine_run])
+    page.wait_for_function(
+        "names => !names.includes(window.intuitfDebug.state.run)", arg=[run, refine_run]
+    )
     branch = current_run(page)
     info = web_server.api("GET", f"/api/runs/{branch}")["info"]
     assert info["parent"]["run"] == run and info["parent"]["candidate"] == g0.split("/")[1]
@@ -441,12 +449,19 @@ def test_hand_edit_becomes_a_history_point(page, web_server, shots):
     wait_full_frame(page)  # the view follows the draft
     shot(page, shots, "hand-edit")
     page.click("#edit-keep")
-    page.wait_for_function("p => window.intuitfDebug.state.current && window.intuitfDebug.state.current !== p", arg=parent)
+    page.wait_for_function(
+        "p => window.intuitfDebug.state.current && window.intuitfDebug.state.current !== p",
+        arg=parent,
+    )
     qid = current(page)
     kept = web_server.api("GET", f"/api/candidates/{qid}")["tf"]["gaussians"][0]
-    assert kept["color"] == [0, 1, 0] and kept["mean"] == pytest.approx(draft["gaussians"][0]["mean"])
+    assert kept["color"] == [0, 1, 0] and kept["mean"] == pytest.approx(
+        draft["gaussians"][0]["mean"]
+    )
     edit_run = qid.split("/")[0]
-    page.wait_for_selector(f".run-node[data-run='{run}'] .branches .run-node[data-run='{edit_run}']")
+    page.wait_for_selector(
+        f".run-node[data-run='{run}'] .branches .run-node[data-run='{edit_run}']"
+    )
 
 
 def test_reference_picture_and_bad_upload(page, web_server, tmp_path):
@@ -466,7 +481,9 @@ def test_reference_picture_and_bad_upload(page, web_server, tmp_path):
     open_settings(page)
     before = current_run(page)
     page.click("#q-start")
-    page.wait_for_function("run => window.intuitfDebug.state.run && window.intuitfDebug.state.run !== run", arg=before)
+    page.wait_for_function(
+        "run => window.intuitfDebug.state.run && window.intuitfDebug.state.run !== run", arg=before
+    )
     run = current_run(page)
     assert web_server.api("GET", f"/api/runs/{run}")["info"]["intent"]["kind"] == "image"
     web_server.wait_run(run)
@@ -484,7 +501,9 @@ def test_fake_model_server_as_the_evaluator(page, web_server, shots):
         detail = wait_run_done(page, web_server, run)
         assert detail["info"]["status"] == "completed"
         assert srv.stats.requests > 0
-        page.wait_for_function("() => !/calls\\s*0\\b/.test(document.getElementById('progress').innerText)")
+        page.wait_for_function(
+            "() => !/calls\\s*0\\b/.test(document.getElementById('progress').innerText)"
+        )
         # The model's reasons are readable beside a pair it judged.
         page.wait_for_function("() => document.querySelectorAll('#gallery-grid .card').length >= 2")
         order = gallery_order(page)
@@ -515,13 +534,17 @@ def test_model_server_down_is_a_message(page, web_server):
     open_settings(page, evaluator=f"http://127.0.0.1:{port}/v1")
     before = current_run(page)
     page.click("#q-start")
-    page.wait_for_function("run => window.intuitfDebug.state.run && window.intuitfDebug.state.run !== run", arg=before)
+    page.wait_for_function(
+        "run => window.intuitfDebug.state.run && window.intuitfDebug.state.run !== run", arg=before
+    )
     run = current_run(page)
     deadline = time.monotonic() + 180
     while web_server.api("GET", f"/api/runs/{run}")["info"]["status"] == "running":
         assert time.monotonic() < deadline
         time.sleep(0.5)
-    page.wait_for_selector("[data-testid=message].toast-error, [data-testid=message].toast-warn", timeout=60_000)
+    page.wait_for_selector(
+        "[data-testid=message].toast-error, [data-testid=message].toast-warn", timeout=60_000
+    )
     assert page.locator("#history-tree .run-node").count() >= 1  # the page still works
     page.click("#query .seg-kind button[data-kind=text]")
 
@@ -557,7 +580,26 @@ def test_pause_resume_stop_continue_and_a_new_stage(page, web_server, shots):
     assert "Continue" in page.inner_text("#q-start")
     page.click("#q-start")
     page.wait_for_function(
-        "run => window.intuitfDebug.state.runDetail?.info.generations_done === 9", arg=run, timeout=120_000
+        "run => window.intuitfDebug.state.runDetail?.info.generations_done === 9",
+        arg=run,
+        timeout=120_000,
     )
     assert current_run(page) == run
     page.wait_for_selector(f".run-node[data-run='{run}'] .stage-mark.stage-customize")
+
+
+def test_volume_upload_and_a_volume_that_does_not_load(page, tmp_path):
+    broken = tmp_path / "broken.npy"
+    broken.write_bytes(b"\x93NUMPY garbage")
+    page.set_input_files("#volume-upload", str(broken))
+    page.wait_for_selector("[data-testid=message].toast-error")
+    assert page.locator("#volume-select option").count() >= 1
+    z, y, x = np.mgrid[-1:1:40j, -1:1:40j, -1:1:40j]
+    ball = (np.clip(1.2 - np.sqrt(x**2 + y**2 + z**2), 0, 1) * 200).astype(np.uint8)
+    good = tmp_path / "ball.npy"
+    np.save(good, ball)
+    page.set_input_files("#volume-upload", str(good))
+    page.wait_for_function(
+        "() => [...document.querySelectorAll('#volume-select option')].some(o => o.selected && /ball/.test(o.value))"
+    )
+    assert any("Loaded" in m for m in messages(page))
