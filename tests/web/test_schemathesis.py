@@ -48,6 +48,7 @@ def _lifespan():
     deadline=None,
     suppress_health_check=list(HealthCheck),
     derandomize=True,
+    database=None,
 )
 def test_no_server_errors(case):
     response = case.call(headers=AUTH)
