@@ -57,7 +57,9 @@ export const refreshRun = coalesced(async () => {
   try {
     const detail = await api.get(`/api/runs/${api.enc(name)}`);
     if (state.run !== name) return;
+    const was = state.runDetail && state.runDetail.info.name === name ? state.runDetail.info.status : null;
     set({ runDetail: detail });
+    if (was !== null && was !== detail.info.status) refreshTree(); // started or ended: the history shows it
   } catch (err) {
     if (state.run === name) showError(err);
   }

@@ -175,7 +175,7 @@ function renderRun(node, depth) {
     if (kids) item.append(el("div.branches", {}, kids.map((k) => renderRun(k, depth + 1))));
     list.append(item);
   }
-  if (info.status === "running") {
+  if (info.status === "running" && (!info.generations || gens.length < info.generations)) {
     list.append(
       el("li.gen.pending", {}, el("span.spinner"), el("span.gen-label", { text: `g${gens.length} …` })),
     );
