@@ -205,7 +205,7 @@ class BatchJob:
             rec["budget"] = {"calls": calls, "usd": usd}
             atomic_write_json(root / "batch.json", rec)
 
-    def run(self, on_update=None, stop_after: float | None = None) -> dict:
+    def run(self, on_update=None, stop_when=None) -> dict:
         """Run every unfinished volume, then write and return the summary."""
         req = self.req
         t0 = time.perf_counter()
@@ -217,7 +217,7 @@ class BatchJob:
             ray_address=req.ray,
             on_update=on_update,
             ledger=self.ledger,
-            stop_after=stop_after,
+            stop_when=stop_when,
             max_concurrency=req.max_concurrency,
             rate_per_min=req.rate_per_min,
         )
@@ -292,10 +292,14 @@ def _request_from_record(root: Path, req: BatchRequest) -> BatchRequest:
     )
 
 
-def run_batch(req: BatchRequest, on_update=None, stop_after: float | None = None) -> dict:
-    """Plan, run and summarise the batch ``req`` describes; returns the summary."""
+def run_batch(req: BatchRequest, on_update=None, stop_when=None) -> dict:
+    """Plan, run and summarise the batch ``req`` describes; returns the summary.
+
+    ``on_update(event, item, result)`` reports progress; ``stop_when()``, polled a few times a
+    second, stops the batch like Ctrl-C when it returns true (every run is resumed later).
+    """
     with BatchJob(req) as job:
-        return job.run(on_update=on_update, stop_after=stop_after)
+        return job.run(on_update=on_update, stop_when=stop_when)
 
 
 def request_dict(req: BatchRequest) -> dict:

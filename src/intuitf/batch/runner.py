@@ -657,7 +657,7 @@ def drive(
     use_ray: bool = False,
     on_update: Callable[[str, VolumeItem, dict | None], None] | None = None,
     ledger: Any = None,
-    stop_after: float | None = None,
+    stop_when: Callable[[], bool] | None = None,
     max_concurrency: int | None = None,
     rate_per_min: float | None = None,
 ) -> dict[str, dict]:
@@ -666,7 +666,7 @@ def drive(
     ``on_update(event, item, result)`` is called with "skipped", "started" and "done".
     ``max_concurrency`` (judge requests in flight) and ``rate_per_min`` (requests started per
     minute) hold for the whole batch: each of the W workers gets a W-th of them.
-    ``stop_after`` (seconds; for tests) stops the batch like Ctrl-C after that long.
+    ``stop_when()``, polled a few times a second, stops the batch like Ctrl-C when true.
     """
     notify = on_update or (lambda *_: None)
     results: dict[str, dict] = {}
@@ -702,7 +702,6 @@ def drive(
         backend = PoolBackend(config, n_workers)
     load = [0] * backend.workers
     running: dict[str, tuple[int, VolumeItem]] = {}
-    started = time.monotonic()
     stopping = False
 
     def exhausted() -> bool:
@@ -711,11 +710,7 @@ def drive(
     try:
         while pending or running:
             try:
-                if (
-                    stop_after is not None
-                    and not stopping
-                    and time.monotonic() - started > stop_after
-                ):
+                if stop_when is not None and not stopping and stop_when():
                     raise KeyboardInterrupt
                 while pending and not stopping:
                     live = [w for w in range(backend.workers) if backend.alive(w)]
