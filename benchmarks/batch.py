@@ -229,7 +229,7 @@ def extrapolate(rows: list[dict], latency: float, args) -> str:
         (f"these settings (population {args.population}, {args.generations} generations, "
          f"{args.size} px)", C, R, O, J),
         ("default settings (population 32, 12 generations, 256 px)",
-         C * (32 * 12) / (args.population * args.generations), R * d_scale, O, J * d_rounds / rounds),
+         C * (32 / args.population) * d_rounds / rounds, R * d_scale, O, J * d_rounds / rounds),
     ]  # fmt: skip
     lines = [
         f"Measured per volume (best row: {best['backend']}, {best['workers']} workers): "
