@@ -194,3 +194,5 @@ def page(browser, web_server):
     yield pg
     context.close()
     assert not errors, f"uncaught errors in the page: {errors}"
+    csp = [c for c in console if "Content Security Policy" in c]
+    assert not csp, f"the page broke its Content-Security-Policy: {csp}"

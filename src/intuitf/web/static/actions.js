@@ -170,7 +170,8 @@ function handleEvent(name, ev) {
       break;
     case "generation_ended":
       refreshRun().then(() => {
-        if (state.run === name && state.follow && d.best) setCurrent(`${name}/${d.best}`, { keepRun: true });
+        // Follow the newest best (not while replaying a run's old events after a reload).
+        if (state.run === name && state.follow && fresh && d.best) setCurrent(`${name}/${d.best}`, { keepRun: true });
       });
       refreshTree();
       break;
