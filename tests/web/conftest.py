@@ -7,156 +7,21 @@ tests are skipped with that reason.
 
 from __future__ import annotations
 
-import json
 import os
-import re
-import shutil
-import signal
-import socket
-import subprocess
-import sys
-import threading
-import time
-import urllib.error
-import urllib.request
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
-
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-]
-#: Small and fast runs: what the tests type into the query panel.
-SMALL = {"population": "6", "generations": "2", "image_size": "64"}
-
-
-def _skip_reason() -> str | None:
-    if CHROMIUM is None:
-        return "no chromium binary on PATH (scripts/test.sh installs Debian's chromium as root)"
-    try:
-        import playwright.sync_api  # noqa: F401
-    except ImportError:
-        return "the playwright package is missing (pip install -e '.[test]')"
-    return None
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-@dataclass
-class WebServer:
-    """A running ``intuitf serve``: its address, token and runs folder, and a small API client."""
-
-    url: str  # the printed address, with ?token=
-    base: str
-    token: str
-    runs: Path
-    proc: subprocess.Popen
-    log: list[str] = field(default_factory=list)
-
-    def api(self, method: str, path: str, body=None, timeout: float = 60.0):
-        """JSON from the server's API (with the token), for setting up and checking."""
-        data = None if body is None else json.dumps(body).encode()
-        req = urllib.request.Request(self.base + path, data=data, method=method)
-        req.add_header("Authorization", f"token {self.token}")
-        if data is not None:
-            req.add_header("Content-Type", "application/json")
-        with urllib.request.urlopen(req, timeout=timeout) as resp:
-            raw = resp.read()
-            return (
-                json.loads(raw) if raw and "json" in resp.headers.get("Content-Type", "") else raw
-            )
-
-    def wait_run(self, name: str, timeout: float = 180.0) -> dict:
-        """The run's detail once it is no longer running."""
-        deadline = time.monotonic() + timeout
-        while True:
-            d = self.api("GET", f"/api/runs/{name}")
-            snap = d.get("snapshot") or {}
-            if d["info"]["status"] != "running" and snap.get("status") in (None, "ended", "idle"):
-                return d
-            if time.monotonic() > deadline:
-                raise AssertionError(f"run {name} still going after {timeout} s: {d['info']}")
-            time.sleep(0.3)
-
-    def start_run(self, text: str, **settings) -> str:
-        """A run started through the API (for tests about something else than starting)."""
-        spec = {
-            "volume": "phantom",
-            "intent": {"kind": "text", "text": text},
-            "judge": {"spec": "metric"},
-            "settings": {"population": 6, "generations": 2, "image_size": 64, **settings},
-        }
-        return self.api("POST", "/api/runs", spec)["name"]
+from browser_util import CHROMIUM, CHROMIUM_ARGS, skip_reason, start_server, stop_server
 
 
 @pytest.fixture(scope="module")
 def web_server(tmp_path_factory):
-    reason = _skip_reason()
+    reason = skip_reason()
     if reason:
         pytest.skip(reason)
-    root = tmp_path_factory.mktemp("web")
-    runs = root / "runs"
-    data = root / "data"  # an empty --data folder: only the built-in phantom is offered
-    data.mkdir()
-    port = _free_port()
-    env = {**os.environ, "PYTHONUNBUFFERED": "1", "COLUMNS": "240", "NO_COLOR": "1"}
-    env.pop("INTUITF_DATA", None)
-    cmd = [
-        sys.executable, "-m", "intuitf", "serve", "--no-browser",
-        "--port", str(port), "--runs", str(runs), "--data", str(data),
-    ]  # fmt: skip
-    proc = subprocess.Popen(
-        cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, cwd=root
-    )
-    log: list[str] = []
-    found: dict[str, str] = {}
-    ready = threading.Event()
-
-    def read() -> None:
-        assert proc.stdout is not None
-        for line in proc.stdout:
-            log.append(line.rstrip())
-            m = re.search(r"(http://127\.0\.0\.1:\d+/\?token=[\w-]+)", line)
-            if m and "url" not in found:
-                found["url"] = m.group(1)
-                ready.set()
-        ready.set()
-
-    threading.Thread(target=read, daemon=True).start()
-    ready.wait(90)
-    if "url" not in found:
-        proc.kill()
-        raise RuntimeError("intuitf serve printed no address:\n" + "\n".join(log))
-    url = found["url"]
-    base = url.split("/?", 1)[0]
-    token = url.split("token=", 1)[1]
-    server = WebServer(url=url, base=base, token=token, runs=runs, proc=proc, log=log)
-    deadline = time.monotonic() + 60
-    while True:
-        try:
-            server.api("GET", "/api/info", timeout=5)
-            break
-        except (urllib.error.URLError, ConnectionError):
-            if time.monotonic() > deadline or proc.poll() is not None:
-                proc.kill()
-                raise RuntimeError("intuitf serve does not answer:\n" + "\n".join(log)) from None
-            time.sleep(0.2)
+    server = start_server(tmp_path_factory.mktemp("web"))
     yield server
-    proc.send_signal(signal.SIGINT)  # Ctrl-C: running runs stop between matches and are kept
-    try:
-        proc.wait(timeout=30)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait(timeout=10)
+    stop_server(server)
 
 
 @pytest.fixture(scope="module")

@@ -603,3 +603,25 @@ def test_volume_upload_and_a_volume_that_does_not_load(page, tmp_path):
         "() => [...document.querySelectorAll('#volume-select option')].some(o => o.selected && /ball/.test(o.value))"
     )
     assert any("Loaded" in m for m in messages(page))
+
+
+def test_a_stopped_server_is_a_message(browser, tmp_path):
+    from browser_util import start_server, stop_server
+
+    server = start_server(tmp_path)
+    try:
+        run = server.start_run("opaque bone", generations=30)
+        ctx = browser.new_context(viewport={"width": 1440, "height": 900})
+        pg = ctx.new_page()
+        errors: list[str] = []
+        pg.on("pageerror", lambda e: errors.append(str(e)))
+        pg.goto(server.url)
+        pg.wait_for_selector("body.ready")
+        pg.wait_for_function("run => window.intuitfDebug.state.run === run", arg=run)
+        pg.wait_for_function("() => window.intuitfDebug.state.live?.connected")
+    finally:
+        stop_server(server)
+    pg.wait_for_selector("[data-testid=server-down]", timeout=30_000)
+    assert any("server stopped" in m for m in messages(pg))
+    assert not errors
+    ctx.close()

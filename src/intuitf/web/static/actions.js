@@ -47,7 +47,8 @@ export const refreshTree = coalesced(async () => {
     const tree = await api.get("/api/tree");
     if (JSON.stringify(tree) !== JSON.stringify(state.tree)) set({ tree });
   } catch (err) {
-    showError(err);
+    if (err.status === 0) checkServer();
+    else showError(err);
   }
 });
 
@@ -61,7 +62,8 @@ export const refreshRun = coalesced(async () => {
     set({ runDetail: detail });
     if (was !== null && was !== detail.info.status) refreshTree(); // started or ended: the history shows it
   } catch (err) {
-    if (state.run === name) showError(err);
+    if (err.status === 0) checkServer();
+    else if (state.run === name) showError(err);
   }
 }, 300);
 
@@ -136,13 +138,39 @@ function subscribe(name) {
   eventsRun = name;
   set({ live: { run: name, connected: false, last: null } });
   events = api.runEvents(name, 0, {
-    open: () => set({ live: { ...state.live, connected: true } }),
-    error: () => set({ live: { ...state.live, connected: false } }),
+    open: () => {
+      set({ live: { ...state.live, connected: true }, serverDown: false });
+    },
+    error: () => {
+      set({ live: { ...state.live, connected: false } });
+      checkServer();
+    },
     event: (ev) => handleEvent(name, ev),
   });
 }
 
 const reported = new Set();
+let checking = false;
+
+/** After a dropped event stream: is the server still there? Say so once if it stopped. */
+async function checkServer() {
+  if (checking) return;
+  checking = true;
+  try {
+    await api.get("/api/info");
+    if (state.serverDown) set({ serverDown: false });
+  } catch (err) {
+    if (err.status === 0 && !state.serverDown) {
+      set({ serverDown: true });
+      showMessage("The intuitf server stopped.", {
+        kind: "error",
+        hint: "Start `intuitf serve` again (same --runs folder) and open its new address: the history is kept.",
+      });
+    }
+  } finally {
+    checking = false;
+  }
+}
 
 function handleEvent(name, ev) {
   if (state.run !== name) return;

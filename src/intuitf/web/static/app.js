@@ -103,7 +103,7 @@ function initTopbar() {
       file.value = "";
     }
   });
-  on(["runDetail", "progressTick", "live"], renderProgress);
+  on(["runDetail", "progressTick", "live", "serverDown"], renderProgress);
   renderProgress();
 }
 
@@ -137,6 +137,7 @@ function renderProgress() {
     el("span.kv", {}, el("span.k", { text: "calls" }), el("span.v", { text: String(p.calls ?? (d.info.cost || {}).calls ?? 0) })),
     el("span.kv", {}, el("span.k", { text: "cost" }), el("span.v", { text: fmtUsd(p.usd ?? (d.info.cost || {}).usd ?? 0) })),
     live ? el("span.kv", { title: "estimated time left" }, el("span.k", { text: "left" }), el("span.v", { text: fmtSeconds(p.seconds_left) })) : null,
+    state.serverDown ? el("span.badge.warn", { text: "server stopped", "data-testid": "server-down" }) : null,
     p.last_error
       ? el("span.badge.warn", { text: "model error", title: p.last_error, "data-testid": "model-error" })
       : null,

@@ -199,7 +199,9 @@ async function showFrame(header, blob) {
   canvas.dataset.quality = header.quality || "";
   canvas.dataset.frames = String(frameCount);
   canvas.dataset.req = String(header.req || "");
-  statsEl.textContent = `${header.width || "?"}×${header.height || "?"} ${header.quality || ""} · ${header.ms !== undefined ? Math.round(header.ms) : "?"} ms`;
+  const ms = header.ms !== undefined ? Math.round(header.ms) : "?";
+  const render = header.render_ms !== undefined ? ` (render ${Math.round(header.render_ms)})` : "";
+  statsEl.textContent = `${header.width || "?"}×${header.height || "?"} ${header.quality || ""} · ${ms} ms${render}`;
   if (header.quality === "full" && !socket.busy) {
     set({ viewSettled: { camera: cameraJSON(), size: viewSize, shaded: state.shaded, key: lastTargetKey, n: frameCount } });
   }
