@@ -17,7 +17,14 @@ judge still prefers the rendering closer to the target picture, like a person wh
 mind) and runs the GA with and without the material hints the text yields
 (``RunSettings.material_hints``; the palette from the text's colours is on in both): the SSIM
 of generation 0's best, the paid judge calls until the best reaches SSIM 0.90, and the final
-SSIM, mean of the seeds (``--seeds``, 5 for the study by default).
+SSIM, mean of the seeds (``--seeds``, 5 for the study by default). Measured (5 seeds, 128 px,
+population 32, 12 generations):
+
+    volume  hints  gen 0 best SSIM  calls to SSIM 0.90       final SSIM
+    tooth   off    0.867            434 (5/5 reached)        0.949
+    tooth   on     0.929            113 (5/5)                0.969
+    engine  off    0.755            >= 1175 (3/5 reached)    0.913
+    engine  on     0.880            525 (5/5)                0.941
 """
 
 from __future__ import annotations
