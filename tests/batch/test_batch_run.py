@@ -17,7 +17,7 @@ import pytest
 
 from intuitf.batch import BatchRequest, run_batch
 from intuitf.imageio import load_image
-from intuitf.testing.fake_mllm import FakeMLLMServer
+from intuitf.testing.fake_mllm import FakeMLLMServer, Latency
 
 TINY = dict(population=6, generations=2, image_size=32, output_size=48, top_k=1, seed=1,
             stages=[["customize", 2]])  # fmt: skip
@@ -215,7 +215,14 @@ def test_local_ray_gives_the_same_results_stopped_or_not(batch_inputs, server, s
         def one_generation_done() -> bool:
             return any((root2 / "runs").glob("*/checkpoint.json"))
 
-        stopped = run_batch(req2, stop_when=one_generation_done)
+        # Slower answers (the same answers) leave time to stop before the runs finish, also
+        # on a loaded machine.
+        fast = server.latency
+        server.latency = Latency.parse(0.25)
+        try:
+            stopped = run_batch(req2, stop_when=one_generation_done)
+        finally:
+            server.latency = fast
         assert set(_statuses(stopped).values()) != {"completed"}
         assert ray.is_initialized()  # a Ray instance the batch did not start is left running
         asked, answered = server.stats.requests, _answers(root2)
