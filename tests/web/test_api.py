@@ -74,6 +74,12 @@ def test_finished_run_detail_gallery_and_tree(client, done_run):
     assert 1 <= len(gallery) <= 8
     assert [g["rank"] for g in gallery] == sorted(g["rank"] for g in gallery)
     assert all(g["qid"] == f"{name}/{g['id']}" for g in gallery)
+    # The page draws a sketch over the run's judging view, and finds its volume by id.
+    from intuitf.render import Camera
+
+    assert done_run["camera"] == Camera().to_dict()  # the camera the run judged from
+    volume_ids = [v["id"] for v in client.get("/api/volumes").json()]
+    assert done_run["volume_id"] in volume_ids
     runs = client.get("/api/runs").json()
     assert any(r["name"] == name and r["status"] == "completed" for r in runs)
     tree = client.get("/api/tree").json()

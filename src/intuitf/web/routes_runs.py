@@ -328,6 +328,7 @@ async def run_detail(request: Request, name: str) -> dict[str, Any]:
         info = await asyncio.to_thread(web.store.run, name)
     except IntuitfError:
         raise ApiError(404, f"There is no run {name!r}.", "Use a name from the run list.") from None
+    where = await asyncio.to_thread(_run_view, web, name)
     live = web.registry.get(name)
     if live is not None:
         s = live.session
@@ -340,6 +341,7 @@ async def run_detail(request: Request, name: str) -> dict[str, Any]:
                 for cid, _tf, r in best
             ]
             return {
+                **where,
                 "info": info.to_dict(),
                 "snapshot": snap.to_dict(),
                 "gallery": gallery,
@@ -350,6 +352,7 @@ async def run_detail(request: Request, name: str) -> dict[str, Any]:
     gallery = await asyncio.to_thread(_gallery_from_checkpoint, web, name)
     cost = info.cost or {}
     return {
+        **where,
         "info": info.to_dict(),
         "snapshot": None,
         "gallery": gallery,
@@ -700,3 +703,19 @@ async def events(
         media_type="text/event-stream",
         headers={"Cache-Control": "no-store", "X-Accel-Buffering": "no"},
     )
+
+
+def _run_view(web, name: str) -> dict[str, Any]:
+    """The run's judging camera (a sketch is drawn over that view) and its volume's id in the
+    server's list (None when the run's volume is not among them)."""
+    from intuitf.render import Camera
+    from intuitf.session import RunDirectory
+
+    try:
+        record = RunDirectory(web.store.path_of(name)).read_run()
+    except IntuitfError:
+        return {"camera": Camera().to_dict(), "volume_id": None}
+    camera = (record.get("settings") or {}).get("camera") or Camera().to_dict()
+    source = ((record.get("spec") or {}).get("volume") or {}).get("source")
+    volume_id = next((e.id for e in web.catalog.entries() if source and e.source == source), None)
+    return {"camera": camera, "volume_id": volume_id}
