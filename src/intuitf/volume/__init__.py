@@ -17,4 +17,8 @@ _EXPORTS = {
 
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
+# ``phantom`` is both a submodule and a function: importing the submodule (as anything that
+# uses it does) would bind the module to the package's name, so the function is bound here.
+from intuitf.volume.phantom import phantom  # noqa: E402
+
 __all__ = ["Volume", "load_volume", "phantom"]

@@ -11,7 +11,6 @@ scanner's point-spread function, and smooth texture and noise make it look measu
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
 
 from intuitf.errors import VolumeError
 from intuitf.volume.volume import Volume
@@ -31,6 +30,8 @@ MATERIALS = {
 
 def _smooth_noise(rng: np.random.Generator, shape: tuple[int, ...], sigma: float) -> np.ndarray:
     """Zero-mean, unit-variance noise correlated over about ``sigma`` voxels."""
+    from scipy import ndimage
+
     factor = max(1.0, sigma / 2.0)
     if factor > 1.5:  # broad noise: make it on a coarse grid and interpolate (much faster)
         small = tuple(max(4, int(np.ceil(s / factor))) for s in shape)
@@ -56,6 +57,8 @@ def _smooth_union(a: np.ndarray, b: np.ndarray, k: float) -> np.ndarray:
 
 def phantom_array(size: int = 96, seed: int = 0) -> np.ndarray:
     """The phantom as a uint8 array ``[z, y, x]`` of ``size`` voxels per side (z up, y front)."""
+    from scipy import ndimage
+
     n = int(size)
     if n < 16 or n > 1024:
         raise VolumeError(
