@@ -261,7 +261,9 @@ def test_a_persons_verdict_changes_what_the_explorer_is_told_and_undo_restores_i
 def test_a_new_query_starts_a_customize_stage_and_keeps_the_history(vol, tmp_path):
     with Session.open(_spec(), tmp_path / "q", volume=vol) as s:
         s.run(write_outputs=False)
+        before = list(s.explorer.hints)
         s.query(Intent(kind="text", text="blue translucent skin"), generations=2)
+        assert list(s.explorer.hints) != before  # the new words name their own materials
         assert s.plan[-1] == ("customize", 2) and not s.done and s.stage == "customize"
         out = s.run(write_outputs=False)
     assert out.completed and out.generations_done == 5

@@ -12,7 +12,7 @@ import numpy as np
 
 from intuitf.errors import RunCancelled, SessionError
 from intuitf.evaluator.types import Intent
-from intuitf.session.helpers import _intent_record, _palette_hint
+from intuitf.session.helpers import _intent_record, _material_hints, _palette_hint
 from intuitf.session.human import HumanVerdict, refit_ranking, stated_orders, weighted_games
 from intuitf.session.scheduler import INTERACTIVE, render_scheduler
 from intuitf.tf import GaussianTF
@@ -202,6 +202,7 @@ class SessionInteraction:
         else:
             ranking, ratings = model_ranking, dict(self._model_ratings or self.ratings)
         palette = getattr(self.explorer, "palette", None)
+        hints = getattr(self.explorer, "hints", None)
         self.explorer = explorer_from_state(self._pre_tell)
         self.explorer.tell(ranking)
         if self.stage_index != self._judged_stage:  # the stage changed after that generation
@@ -209,6 +210,8 @@ class SessionInteraction:
             self.explorer.set_stage(stage, generations=n)
             if palette is not None:
                 self.explorer.palette = palette
+            if hints is not None:
+                self.explorer.hints = hints
         self.last_ranking, self.ratings = ranking, ratings
 
     _model_ranking: list[str] | None = None
@@ -259,6 +262,10 @@ class SessionInteraction:
                 from intuitf.explorer.base import _palette
 
                 self.explorer.palette = _palette(palette)
+            if hasattr(self.explorer, "hints"):  # the new words name their own materials
+                from intuitf.explorer.hints import as_hints
+
+                self.explorer.hints = as_hints(_material_hints(intent, self.settings, self.volume))
             self.explorer.set_stage("customize", generations=n)
             record = {"type": "query", "generation": self.generation, "intent": _intent_record(intent), "pictures": pictures}  # fmt: skip
             self._journal(record)
