@@ -114,25 +114,15 @@ class SessionOpening:
         spec: RunSpec | None = None,
     ) -> Session:
         """Start a new run from in-memory objects. ``initial`` TFs join the first population."""
-        from intuitf.session.lock import RunLock
-
         intent = intent or Intent()
         settings = settings or RunSettings()
         settings.validate()
-        if judge is None:
-            from intuitf.evaluator.metric import MetricJudge
-
-            judge = MetricJudge()
-        rd = RunDirectory(run_dir) if run_dir is not None else None
-        lock = None
-        if rd is not None:
-            rd.root.mkdir(parents=True, exist_ok=True)
-            lock = RunLock(rd.root)
-            lock.acquire()
+        rd, lock = _locked(run_dir)
         try:
             return cls._new(
-                volume, intent, judge, settings, rd, list(initial), overwrite, spec, lock
-            )
+                volume, intent, judge or _metric_judge(), settings, rd, list(initial), overwrite,
+                spec, lock,
+            )  # fmt: skip
         except BaseException:
             if lock is not None:
                 lock.release()
@@ -229,22 +219,12 @@ class SessionOpening:
         intent = Intent(
             kind="edit", text=instruction, selected=tuple(int(i) for i in selected), about=about
         )
-        if judge is None:
-            from intuitf.evaluator.metric import MetricJudge
-
-            judge = MetricJudge()
-        rd = RunDirectory(run_dir) if run_dir is not None else None
-        lock = None
-        if rd is not None:
-            from intuitf.session.lock import RunLock
-
-            rd.root.mkdir(parents=True, exist_ok=True)
-            lock = RunLock(rd.root)
-            lock.acquire()
+        rd, lock = _locked(run_dir)
         try:
             return cls._refine_from(
-                volume, tf, intent, judge, settings or RunSettings(), rd, None, overwrite, lock
-            )
+                volume, tf, intent, judge or _metric_judge(), settings or RunSettings(), rd, None,
+                overwrite, lock,
+            )  # fmt: skip
         except BaseException:
             if lock is not None:
                 lock.release()
@@ -534,3 +514,20 @@ def _judge_history(spec: RunSpec, generation: int) -> list[dict]:
     from intuitf.evaluator.factory import judge_record
 
     return judge_record(spec.judge.spec, spec.judge.base_url, generation)["judges"]
+
+
+def _locked(run_dir) -> tuple[RunDirectory | None, Any]:
+    """The run folder (made if missing) and this process's lock on it; (None, None) in memory."""
+    from intuitf.session.lock import RunLock
+
+    if run_dir is None:
+        return None, None
+    rd = RunDirectory(run_dir)
+    rd.root.mkdir(parents=True, exist_ok=True)
+    return rd, RunLock(rd.root).acquire()
+
+
+def _metric_judge():
+    from intuitf.evaluator.metric import MetricJudge
+
+    return MetricJudge()
