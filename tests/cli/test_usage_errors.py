@@ -81,6 +81,8 @@ def test_usage_errors_of_either_click_flavour_are_shown_not_raised(module, monke
     [
         (["optimize", "phantom", "--explorer", "banana"], "'ga', 'paper-ga', 'cmaes', 'random'"),
         (["optimize", "phantom", "--protocol", "swiss"], "'efficient', 'paper'"),
+        (["batch", "ref.png", "phantom", "--explorer", "banana"], "'ga', 'paper-ga', 'cmaes'"),
+        (["batch", "ref.png", "phantom", "--protocol", "swiss"], "'efficient', 'paper'"),
         (["export", "x.json", "--to", "blender"], "'paraview', 'slicer', 'vtk', '1dt'"),
         (["info", "phantom", "--byte-order", "middle"], "'little', 'big'"),
         (["info", "phantom", "--dtype", "uint12"], "'uint8', 'int8', 'uint16'"),

@@ -181,10 +181,8 @@ def register(app: typer.Typer) -> None:
         generations: int = typer.Option(12, "--generations"),
         gaussians: int = typer.Option(5, "--gaussians"),
         seed: int = typer.Option(0, "--seed"),
-        explorer: str = typer.Option("ga", "--explorer", help="ga | cmaes | random | paper-ga"),
-        protocol: str = typer.Option(
-            "efficient", "--protocol", help="efficient | paper (tournament)"
-        ),
+        explorer: vo.ExplorerOpt = "ga",
+        protocol: vo.ProtocolOpt = "efficient",
         size: int = typer.Option(256, "--size", help="Image size for judging."),
         output_size: int = typer.Option(
             512, "--output-size", help="Image size of the best renderings."
@@ -244,7 +242,7 @@ def register(app: typer.Typer) -> None:
                 )
             settings = dict(
                 population=population, generations=generations, n_gaussians=gaussians,
-                seed=seed, explorer=explorer, protocol=protocol, image_size=size,
+                seed=seed, explorer=str(explorer), protocol=str(protocol), image_size=size,
                 output_size=output_size, top_k=top, shading=shading,
                 camera=_camera(azimuth, elevation), palette_hint=palette,
                 material_hints=hints,

@@ -211,12 +211,8 @@ def register(app: typer.Typer) -> None:
             help="Seconds to get one answer, retries included (default 60, or the config).",
         ),
         seed: int = typer.Option(0, "--seed"),
-        explorer: vo.Explorer = typer.Option(
-            "ga", "--explorer", case_sensitive=False, help="Search method."
-        ),
-        protocol: vo.Protocol = typer.Option(
-            "efficient", "--protocol", case_sensitive=False, help="Tournament protocol."
-        ),
+        explorer: vo.ExplorerOpt = "ga",
+        protocol: vo.ProtocolOpt = "efficient",
         size: int = typer.Option(
             None,
             "--size",

@@ -82,6 +82,16 @@ def _protocols() -> tuple[str, ...]:
 Explorer = choices("Explorer", _explorer_methods())
 Protocol = choices("Protocol", _protocols())
 
+#: The search options ``optimize`` and ``batch`` share.
+ExplorerOpt = Annotated[
+    Explorer,
+    typer.Option("--explorer", case_sensitive=False, help="Search method."),
+]
+ProtocolOpt = Annotated[
+    Protocol,
+    typer.Option("--protocol", case_sensitive=False, help="Tournament protocol."),
+]
+
 VolumeArg = Annotated[
     str,
     typer.Argument(
