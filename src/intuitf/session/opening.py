@@ -256,7 +256,6 @@ class SessionOpening:
         and ``base_url`` move the run to another model or server (recorded in ``run.json``);
         the budgets replace the run's and count everything the run already paid.
         """
-        from intuitf.explorer import explorer_from_state
         from intuitf.session.building import build_judge, load_intent, redacted, spec_of_record
         from intuitf.session.lock import RunLock
 
@@ -291,46 +290,15 @@ class SessionOpening:
             if ckpt is None:
                 # Stopped before the first generation finished: start over, same seed; the
                 # verdict store still holds whatever was paid for.
-                initial = [GaussianTF.from_dict(d) for d in spec.initial]
-                sess = cls._new(vol, intent, judge, settings, None, initial, False, spec, lock)
+                sess = cls._new(vol, intent, judge, settings, None, initial_tfs, False, spec, lock)
                 sess.run_dir = rd
                 sess.name = rd.root.name
                 sess.events = EventLog(sess.name, rd.events)
                 sess.cost = _paid(judge, sess.cost, rd)
-                sess.judge_moved = moved
-                sess._refresh()
-                if moved:
-                    sess._journal({"type": "judge", "generation": 0, "judge": _judge_name(judge)})
-                return sess
-            sess = cls(
-                vol,
-                intent=intent,
-                judge=judge,
-                settings=settings,
-                run_dir=rd,
-                explorer=explorer_from_state(ckpt["explorer"]),
-                stage_index=int(ckpt["stage_index"]),
-                generation=generation,
-                cost=_paid(judge, Cost(**ckpt.get("cost", {})), rd),
-                ratings={k: float(v) for k, v in ckpt.get("ratings", {}).items()},
-                last_ranking=list(ckpt.get("ranking", [])),
-                population_tfs={k: GaussianTF.from_dict(v) for k, v in ckpt.get("tfs", {}).items()},
-                stage_games=ckpt.get("stage_games", []),
-                plan=ckpt.get("plan"),
-                spec=spec,
-                human=[HumanVerdict.from_dict(h) for h in ckpt.get("human", [])],
-                pre_tell=ckpt.get("pre_tell"),
-                queries=int(ckpt.get("queries", 0)),
-                lock=lock,
-            )
-            sess._model_ranking = ckpt.get("model_ranking")
-            sess._model_ratings = ckpt.get("model_ratings")
-            if "judged_games" in ckpt:
-                sess._judged_games = [tuple(g) for g in ckpt["judged_games"]]
-                sess._judged_stage = int(ckpt.get("judged_stage", sess.stage_index))
-            if ckpt.get("intent"):
-                sess._current_intent_record = ckpt["intent"]
+            else:
+                sess = cls._from_checkpoint(vol, intent, judge, settings, rd, ckpt, spec, lock)
             sess.judge_moved = moved
+            sess._refresh()
             if moved:
                 sess._journal(
                     {"type": "judge", "generation": generation, "judge": _judge_name(judge)}
@@ -339,6 +307,41 @@ class SessionOpening:
         except BaseException:
             lock.release()
             raise
+
+    @classmethod
+    def _from_checkpoint(cls, vol, intent, judge, settings, rd, ckpt, spec, lock) -> Session:
+        """The session a checkpoint describes (the state after its last finished generation)."""
+        from intuitf.explorer import explorer_from_state
+
+        sess = cls(
+            vol,
+            intent=intent,
+            judge=judge,
+            settings=settings,
+            run_dir=rd,
+            explorer=explorer_from_state(ckpt["explorer"]),
+            stage_index=int(ckpt["stage_index"]),
+            generation=int(ckpt["generation"]),
+            cost=_paid(judge, Cost(**ckpt.get("cost", {})), rd),
+            ratings={k: float(v) for k, v in ckpt.get("ratings", {}).items()},
+            last_ranking=list(ckpt.get("ranking", [])),
+            population_tfs={k: GaussianTF.from_dict(v) for k, v in ckpt.get("tfs", {}).items()},
+            stage_games=ckpt.get("stage_games", []),
+            plan=ckpt.get("plan"),
+            spec=spec,
+            human=[HumanVerdict.from_dict(h) for h in ckpt.get("human", [])],
+            pre_tell=ckpt.get("pre_tell"),
+            queries=int(ckpt.get("queries", 0)),
+            lock=lock,
+        )
+        sess._model_ranking = ckpt.get("model_ranking")
+        sess._model_ratings = ckpt.get("model_ratings")
+        if "judged_games" in ckpt:
+            sess._judged_games = [tuple(g) for g in ckpt["judged_games"]]
+            sess._judged_stage = int(ckpt.get("judged_stage", sess.stage_index))
+        if ckpt.get("intent"):
+            sess._current_intent_record = ckpt["intent"]
+        return sess
 
     @classmethod
     def branch(
