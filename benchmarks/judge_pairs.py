@@ -231,7 +231,7 @@ def load_pairs(folder: Path = OUT):
 
 def agreement(judge, folder: Path = OUT, aspect_set: str = "quality") -> dict[str, float]:
     """Share of pairs where ``judge``'s overall verdict names the labelled side, per kind."""
-    from intuitf.evaluator.aspects import aspects_for
+    from intuitf.intent.aspects import aspects_for
     from intuitf.evaluator.types import Intent
 
     aspects = aspects_for(aspect_set)

@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from intuitf.evaluator.aspects import aspects_for
+from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.cache import VerdictCache
 from intuitf.evaluator.mllm import MLLMJudge
 from intuitf.evaluator.types import Intent

@@ -47,7 +47,7 @@ import numpy as np
 from PIL import Image
 from scipy.stats import kendalltau
 
-from intuitf.evaluator.aspects import aspects_for
+from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.cache import VerdictCache
 from intuitf.evaluator.metric import MetricJudge
 from intuitf.evaluator.mllm import MLLMJudge

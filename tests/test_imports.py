@@ -24,7 +24,7 @@ def test_import_intuitf_loads_no_heavy_dependency():
 
 def test_the_evaluators_pure_core_needs_neither_openai_nor_sqlite():
     loaded = _loaded_after(
-        "import intuitf.evaluator.tournament, intuitf.evaluator.aspects, "
+        "import intuitf.evaluator.tournament, intuitf.intent.aspects, "
         "intuitf.evaluator.prompts, intuitf.evaluator.parsing, intuitf.evaluator.metric"
     )
     assert "openai" not in loaded and "sqlite3" not in loaded and "httpx" not in loaded

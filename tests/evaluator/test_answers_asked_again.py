@@ -12,7 +12,7 @@ import asyncio
 import numpy as np
 import pytest
 
-from intuitf.evaluator.aspects import aspects_for
+from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.cache import VerdictCache
 from intuitf.evaluator.mllm import MLLMJudge
 from intuitf.evaluator.tournament import MatchRecord, MatchStats, SwissTournament

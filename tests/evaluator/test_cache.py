@@ -7,7 +7,7 @@ import sqlite3
 
 import numpy as np
 
-from intuitf.evaluator.aspects import aspects_for
+from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.cache import VerdictCache, request_key
 from intuitf.evaluator.mllm import MLLMJudge
 from intuitf.evaluator.types import Choice, Intent

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from intuitf.evaluator.aspects import aspects_for
+from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.metric import MetricJudge
 from intuitf.evaluator.metric_quality import quality
 from intuitf.evaluator.types import Choice, Intent

@@ -10,7 +10,7 @@ import time
 import pytest
 
 from intuitf.errors import JudgeError
-from intuitf.evaluator.aspects import aspects_for
+from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.cache import VerdictCache
 from intuitf.evaluator.mllm import MLLMJudge
 from intuitf.evaluator.types import Choice, Intent

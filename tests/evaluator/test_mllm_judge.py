@@ -8,7 +8,7 @@ import itertools
 import numpy as np
 import pytest
 
-from intuitf.evaluator.aspects import aspects_for, aspects_for_intent
+from intuitf.intent.aspects import aspects_for, aspects_for_intent
 from intuitf.evaluator.mllm import MLLMJudge
 from intuitf.evaluator.types import Choice, Intent, Judge
 from intuitf.testing.fake_mllm import FakeMLLMServer

@@ -8,7 +8,7 @@ import logging
 import pytest
 
 from intuitf.errors import JudgeError
-from intuitf.evaluator.aspects import aspects_for
+from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.cache import VerdictCache
 from intuitf.evaluator.factory import make_judge
 from intuitf.evaluator.mllm import MLLMJudge

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from intuitf.evaluator.aspects import aspects_for
+from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.parsing import UnreadableAnswer, normalise_choice, parse_answer
 from intuitf.evaluator.types import Choice
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from intuitf.errors import JudgeError
-from intuitf.evaluator.aspects import aspects_for
+from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.compose import (
     BEFORE_LABEL,
     FIRST_LABEL,

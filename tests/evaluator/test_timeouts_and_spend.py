@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from intuitf.errors import BudgetExhausted, IntuitfError, JudgeError
-from intuitf.evaluator.aspects import aspects_for
+from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.budget import (
     Budget,
     reset_spend,

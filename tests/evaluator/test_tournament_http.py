@@ -14,7 +14,7 @@ import pytest
 from scipy.stats import kendalltau
 
 from intuitf.errors import BudgetExhausted
-from intuitf.evaluator.aspects import aspects_for
+from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.budget import Budget
 from intuitf.evaluator.cache import VerdictCache
 from intuitf.evaluator.mllm import MLLMJudge

@@ -12,7 +12,7 @@ from rich.table import Table
 
 from intuitf.errors import IntuitfError
 from intuitf.evaluator.agreement import evaluate_agreement, parse_pairs
-from intuitf.evaluator.aspects import aspects_for, builtin_catalogue
+from intuitf.intent.aspects import aspects_for, builtin_catalogue
 from intuitf.evaluator.types import Intent
 
 

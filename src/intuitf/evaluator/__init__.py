@@ -6,10 +6,10 @@ from intuitf._lazy import lazy_exports
 
 if TYPE_CHECKING:  # the names below, for type checkers and editors
     from intuitf.evaluator.agreement import agreement_score as agreement_score
-    from intuitf.evaluator.aspects import AspectCatalogue as AspectCatalogue
-    from intuitf.evaluator.aspects import aspects_for as aspects_for
-    from intuitf.evaluator.aspects import aspects_for_intent as aspects_for_intent
-    from intuitf.evaluator.aspects import load_aspects as load_aspects
+    from intuitf.intent.aspects import AspectCatalogue as AspectCatalogue
+    from intuitf.intent.aspects import aspects_for as aspects_for
+    from intuitf.intent.aspects import aspects_for_intent as aspects_for_intent
+    from intuitf.intent.aspects import load_aspects as load_aspects
     from intuitf.evaluator.budget import Budget as Budget
     from intuitf.evaluator.cache import VerdictCache as VerdictCache
     from intuitf.evaluator.factory import make_judge as make_judge
@@ -23,10 +23,10 @@ if TYPE_CHECKING:  # the names below, for type checkers and editors
 
 _EXPORTS = {
     "agreement_score": "intuitf.evaluator.agreement",
-    "AspectCatalogue": "intuitf.evaluator.aspects",
-    "aspects_for": "intuitf.evaluator.aspects",
-    "aspects_for_intent": "intuitf.evaluator.aspects",
-    "load_aspects": "intuitf.evaluator.aspects",
+    "AspectCatalogue": "intuitf.intent.aspects",
+    "aspects_for": "intuitf.intent.aspects",
+    "aspects_for_intent": "intuitf.intent.aspects",
+    "load_aspects": "intuitf.intent.aspects",
     "Budget": "intuitf.evaluator.budget",
     "VerdictCache": "intuitf.evaluator.cache",
     "make_judge": "intuitf.evaluator.factory",

@@ -225,7 +225,7 @@ def intent_images(intent: Intent) -> list[LabelledImage]:
         if intent.selection_mask is not None and np.asarray(intent.selection_mask).any():
             # "Make this gold" needs the model to see which "this": the paper highlights
             # selections to prevent miscommunication.
-            from intuitf.evaluator.selection import outline_selection
+            from intuitf.intent.selection import outline_selection
 
             outlined = outline_selection(base, intent.selection_mask)
             parts.append(LabelledImage("selection", SELECTION_LABEL, outlined))

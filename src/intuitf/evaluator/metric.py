@@ -76,55 +76,9 @@ from skimage.transform import resize
 
 from intuitf.evaluator.metric_quality import Quality, quality
 from intuitf.evaluator.types import Aspect, Choice, Cost, Intent, Verdict, weighted_overall
+from intuitf.intent.colours import NAMED_COLOURS, named_colours
 
 #: Colour names a text may use, as sRGB (0-255). Multi-word names are matched first.
-NAMED_COLOURS: dict[str, tuple[int, int, int]] = {
-    "bone white": (241, 235, 218),
-    "off white": (245, 245, 235),
-    "light blue": (150, 190, 240),
-    "dark blue": (20, 40, 140),
-    "sky blue": (135, 206, 235),
-    "navy blue": (20, 30, 110),
-    "light green": (144, 238, 144),
-    "dark green": (0, 100, 0),
-    "dark red": (139, 0, 0),
-    "light gray": (200, 200, 200),
-    "light grey": (200, 200, 200),
-    "dark gray": (80, 80, 80),
-    "dark grey": (80, 80, 80),
-    "red": (220, 30, 30),
-    "crimson": (220, 20, 60),
-    "maroon": (128, 0, 0),
-    "pink": (255, 160, 190),
-    "orange": (255, 140, 0),
-    "yellow": (240, 220, 40),
-    "yellowish": (230, 215, 90),
-    "gold": (212, 175, 55),
-    "golden": (212, 175, 55),
-    "green": (40, 170, 60),
-    "lime": (150, 230, 50),
-    "teal": (0, 128, 128),
-    "cyan": (0, 200, 220),
-    "turquoise": (64, 224, 208),
-    "blue": (40, 80, 220),
-    "navy": (20, 30, 110),
-    "purple": (130, 50, 160),
-    "violet": (150, 80, 220),
-    "magenta": (220, 40, 200),
-    "brown": (130, 80, 40),
-    "beige": (225, 205, 165),
-    "tan": (210, 180, 140),
-    "ivory": (250, 245, 225),
-    "white": (245, 245, 245),
-    "silver": (192, 192, 198),
-    "gray": (128, 128, 128),
-    "grey": (128, 128, 128),
-    "black": (20, 20, 20),
-}
-
-_COLOUR_RE = re.compile(
-    r"\b(" + "|".join(re.escape(k) for k in sorted(NAMED_COLOURS, key=len, reverse=True)) + r")\b"
-)
 # Typos such as "opque" / "opqaue" occur in real prompts; match them too.
 _SEMI_RE = re.compile(r"\b(semi[- ]?(op\w*|transparent)|translucent|half[- ]?transparent)\b")
 _OPAQUE_RE = re.compile(r"\b(fully?[- ]?)?op[aq]\w*e\b|\bsolid\b")
@@ -228,15 +182,6 @@ def _features(image: np.ndarray) -> _Features:
 def _named_lab(names: Sequence[str]) -> np.ndarray:
     rgb = np.array([NAMED_COLOURS[n] for n in names], dtype=np.float32)[None] / 255.0
     return rgb2lab(rgb)[0]
-
-
-def named_colours(text: str) -> list[str]:
-    """The colour names in ``text`` that the judge can check, in order, without repeats."""
-    found = []
-    for m in _COLOUR_RE.finditer(text.lower()):
-        if m.group(1) not in found:
-            found.append(m.group(1))
-    return found
 
 
 def _resize_like(arr: np.ndarray, shape: tuple[int, int], order: int) -> np.ndarray:

@@ -61,11 +61,11 @@ class BaseExplorer:
         bounds: where parameters may go (:class:`Bounds`; default: normalised defaults).
         presets: the stage presets the names resolve to (default :data:`STAGES`).
         palette: RGB colours (0..1) the intent asks for (see
-            :func:`intuitf.evaluator.palette.intent_palette`); the stage presets say how
+            :func:`intuitf.intent.palette.intent_palette`); the stage presets say how
             often new colours come from it. Empty: colours come from the whole colour space.
         hints: materials the intent names, each with where it sits, its colour and opacity
             (:class:`~intuitf.explorer.hints.Hint` or its dict; see
-            :func:`intuitf.evaluator.hints.explorer_hints`). ``hint_share`` of a fresh
+            :func:`intuitf.intent.hints.explorer_hints`). ``hint_share`` of a fresh
             population is placed on them, and mutations draw a Gaussian's colour and height
             from its material's hint now and then (``hint_prob``). Empty: no hints.
 

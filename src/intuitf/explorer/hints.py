@@ -2,7 +2,7 @@
 
 A hint says where a material sits in the (normalised) data range, what colour the user wants
 it in and how opaque (a band of Gaussian heights). The Explorer never sees text or images: the
-evaluator side turns words into hints (:mod:`intuitf.evaluator.hints`) the way it turns them
+evaluator side turns words into hints (:mod:`intuitf.intent.hints`) the way it turns them
 into a palette. The Explorer places part of its first population on them and, now and then,
 draws a Gaussian's colour or height from the hint of the material it sits on. A hint without
 a ``center`` applies to every free Gaussian (an edit of selected features: "make it gold").

@@ -11,7 +11,7 @@ def _palette_hint(intent: Intent, settings: RunSettings) -> list[tuple[float, fl
     """The colours the intent asks for, as a hint for the explorer (see ``RunSettings``)."""
     if not settings.palette_hint:
         return []
-    from intuitf.evaluator.palette import intent_palette
+    from intuitf.intent.palette import intent_palette
 
     return intent_palette(intent, background=tuple(settings.background))
 
@@ -20,7 +20,7 @@ def _material_hints(intent: Intent, settings: RunSettings, volume) -> list[dict]
     """The materials the intent's words name, placed on the volume (see ``RunSettings``)."""
     if not getattr(settings, "material_hints", True):
         return []
-    from intuitf.evaluator.hints import explorer_hints
+    from intuitf.intent.hints import explorer_hints
 
     return explorer_hints(intent, volume)
 
@@ -29,7 +29,7 @@ def _with_selection(intent: Intent, volume, initial, settings: RunSettings) -> I
     """An edit intent with its base rendering and the mask of the selected features' pixels."""
     if intent.kind != "edit" or len(initial) != 1:
         return intent
-    from intuitf.evaluator.selection import edit_intent
+    from intuitf.intent.selection import edit_intent
 
     return edit_intent(intent, volume, initial[0], settings)
 

@@ -67,7 +67,7 @@ def _generation_seed(seed: int, generation: int) -> int:
 
 
 def _aspects_for_stage(stage_aspects: str, intent: Intent) -> list[Aspect]:
-    from intuitf.evaluator.aspects import aspects_for, aspects_for_intent
+    from intuitf.intent.aspects import aspects_for, aspects_for_intent
 
     if stage_aspects == "quality" or intent.kind == "none":
         return aspects_for("quality")

@@ -21,7 +21,7 @@ class RunSettings:
 
     ``material_hints``: seed part of the first population, and draw colour and height
     mutations, from the materials the text names ("opaque ivory bone, faint red skin"),
-    placed on the volume's histogram (:mod:`intuitf.evaluator.hints`).
+    placed on the volume's histogram (:mod:`intuitf.intent.hints`).
     """
 
     population: int = 32

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from intuitf.evaluator.palette import (
+from intuitf.evaluator.types import Intent
+from intuitf.intent.palette import (
     intent_palette,
     palette_from_image,
     palette_from_sketch,
     palette_from_text,
 )
-from intuitf.evaluator.types import Intent
 
 
 def _close(a, b, tol=0.08) -> bool:

@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.cluster.vq import kmeans2
 
-from intuitf.evaluator.metric import NAMED_COLOURS, named_colours
 from intuitf.evaluator.types import Intent
+from intuitf.intent.colours import NAMED_COLOURS, named_colours
 
 RGB = tuple[float, float, float]
 

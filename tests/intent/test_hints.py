@@ -8,15 +8,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from intuitf.evaluator.hints import (
+from intuitf.evaluator.types import Intent
+from intuitf.explorer.hints import Hint, as_hints
+from intuitf.intent.hints import (
     explorer_hints,
     intent_hints,
     is_hounsfield,
     parse_text,
     place_hints,
 )
-from intuitf.evaluator.types import Intent
-from intuitf.explorer.hints import Hint, as_hints
 from intuitf.volume import Volume
 
 DATA = Path(

@@ -33,8 +33,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from intuitf.evaluator.metric import NAMED_COLOURS, named_colours
 from intuitf.evaluator.types import Intent
+from intuitf.intent.colours import NAMED_COLOURS, named_colours
 
 RGB = tuple[float, float, float]
 

@@ -165,7 +165,7 @@ def builtin_catalogue() -> AspectCatalogue:
     """The catalogue shipped with intuitf (read once from package data)."""
     global _BUILTIN
     if _BUILTIN is None:
-        text = resources.files("intuitf.evaluator").joinpath("aspects.json").read_text("utf-8")
+        text = resources.files("intuitf.intent").joinpath("aspects.json").read_text("utf-8")
         cat = AspectCatalogue.from_dict(json.loads(text), source="catalogue shipped with intuitf")
         cat.validate()
         _BUILTIN = cat

@@ -7,13 +7,13 @@ import asyncio
 import numpy as np
 import pytest
 
-from intuitf.evaluator.aspects import aspects_for
 from intuitf.evaluator.compose import BEFORE_LABEL, SELECTION_LABEL, comparison_images
 from intuitf.evaluator.metric import MetricJudge
 from intuitf.evaluator.mllm import MLLMJudge
 from intuitf.evaluator.prompts import user_prompt
-from intuitf.evaluator.selection import outline_selection, selection_mask
 from intuitf.evaluator.types import Choice, Intent
+from intuitf.intent.aspects import aspects_for
+from intuitf.intent.selection import outline_selection, selection_mask
 from intuitf.testing.fake_mllm import FakeMLLMServer
 
 S = 64

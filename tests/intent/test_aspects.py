@@ -7,14 +7,14 @@ import json
 import numpy as np
 import pytest
 
-from intuitf.evaluator.aspects import (
+from intuitf.evaluator.types import Intent
+from intuitf.intent.aspects import (
     AspectError,
     aspects_for,
     aspects_for_intent,
     builtin_catalogue,
     load_aspects,
 )
-from intuitf.evaluator.types import Intent
 
 
 def test_builtin_sets_hold_the_paper_aspects():
