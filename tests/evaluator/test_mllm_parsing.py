@@ -6,9 +6,9 @@ import json
 
 import pytest
 
-from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.parsing import UnreadableAnswer, normalise_choice, parse_answer
 from intuitf.evaluator.types import Choice
+from intuitf.intent.aspects import aspects_for
 
 Q = aspects_for("quality")
 F, S, T = Choice.FIRST, Choice.SECOND, Choice.TIE
@@ -116,3 +116,77 @@ def test_unusable_answers(text, reason):
     with pytest.raises(UnreadableAnswer) as exc:
         parse_answer(text, Q)
     assert exc.value.reason == reason
+
+
+# -- answers of reasoning models and prose comparisons (each failed before the robust reader) --
+
+
+def _schema(choice_ir="first", choice_fd="second"):
+    return json.dumps(
+        {
+            "aspects": {
+                "information_richness": {"analysis": "a", "choice": choice_ir},
+                "feature_discrimination": {"analysis": "b", "choice": choice_fd},
+                "color_content_harmony": {"analysis": "c", "choice": "cannot decide"},
+            }
+        }
+    )
+
+
+def test_prose_image_2_better_than_image_1_is_a_vote_for_the_second():
+    text = "Final answer:\n[information_richness]: Image 2 is better than Image 1"
+    assert parse_answer(text, Q).per_aspect["information_richness"] is S
+    assert normalise_choice("Image 2 is better than Image 1") is S
+    assert normalise_choice("Image 1 is worse than Image 2") is S
+    assert normalise_choice("I prefer the second image over the first") is S
+    assert normalise_choice("Image 1 is clearer than Image 2") is F
+
+
+def test_think_block_with_braces_before_the_json():
+    text = (
+        '<think>Let me weigh {information} vs {features}; maybe {"choice": "second"}?'
+        "</think>\n" + _schema()
+    )
+    p = parse_answer(text, Q)
+    assert list(p.per_aspect.values()) == [F, S, T]
+
+
+def test_thought_block_and_unclosed_reasoning_are_dropped():
+    assert (
+        parse_answer("<thought>{x}</thought>" + _schema(), Q).per_aspect["information_richness"]
+        is F
+    )
+    # The chat template put the opening tag into the prompt: only the closing tag is seen.
+    assert (
+        parse_answer("weighing {a} and {b}</think>" + _schema("second"), Q).per_aspect[
+            "information_richness"
+        ]
+        is S
+    )
+    with pytest.raises(UnreadableAnswer):
+        parse_answer("<think>still thinking about " + _schema(), Q)
+
+
+def test_draft_json_followed_by_the_final_one_reads_the_final_one():
+    text = "Draft: " + _schema("first") + "\nOn reflection, the final answer:\n" + _schema("second")
+    assert parse_answer(text, Q).per_aspect["information_richness"] is S
+
+
+def test_list_of_parts_content_is_read_from_its_text_parts():
+    parts = [
+        {
+            "type": "reasoning",
+            "text": '{"aspects": {"information_richness": {"choice": "second"}}}',
+        },
+        {"type": "text", "text": _schema("first")},
+    ]
+    assert parse_answer(parts, Q).per_aspect["information_richness"] is F
+
+
+def test_not_found_in_prose_is_not_blind():
+    with pytest.raises(UnreadableAnswer) as exc:
+        parse_answer("The skull's outline was not found in either rendering, sadly.", Q)
+    assert exc.value.reason == "unreadable"
+    with pytest.raises(UnreadableAnswer) as exc:
+        parse_answer("The image was not found.", Q)
+    assert exc.value.reason == "blind"

@@ -3,6 +3,12 @@
 :func:`parse_answer` returns a choice per aspect, or raises :class:`UnreadableAnswer` with a
 reason ("refusal", "blind" when the model says it cannot see the images, "unreadable"), which the
 judge turns into a logged tie. Aspects the answer leaves out are ties.
+
+Reasoning models write around their answer: ``<think>``/``<thought>`` blocks (possibly holding
+braces and draft JSON) are dropped first, then every JSON value in the text is decoded and the
+*last* one that names the expected aspects is the answer (a draft followed by the final one reads
+as the final one). Content given as a list of parts (text and reasoning parts) is read from its
+text parts only.
 """
 
 from __future__ import annotations
@@ -56,15 +62,36 @@ _TIE = {
 
 _BLIND = re.compile(
     r"cannot see|can't see|can not see|unable to (see|view|access)|no images? (was|were|is|are) "
-    r"(provided|attached|shown)|images? (did not|didn't) (load|come through)|not found",
+    r"(provided|attached|shown)|images? (did not|didn't) (load|come through)|"
+    r"images? (was |were |is |are )?not (found|attached|provided)",
     re.IGNORECASE,
 )
+#: Reasoning a model writes before its answer, in the tags the common chat templates use.
+_THINK = re.compile(
+    r"<(think|thinking|thought|reasoning|reflection)>.*?</\1\s*>", re.IGNORECASE | re.DOTALL
+)
+_THINK_OPEN = re.compile(r"<(think|thinking|thought|reasoning)>", re.IGNORECASE)
+_THINK_CLOSE = re.compile(r"</(think|thinking|thought|reasoning)\s*>", re.IGNORECASE)
+#: Part types that carry reasoning, not the answer, in list-of-parts content.
+_REASONING_PARTS = {"reasoning", "thinking", "thought", "reasoning_content", "redacted_thinking"}
 _REFUSAL = re.compile(
     r"\b(i'm sorry|i am sorry|i can(no|')t (help|assist|comply)|i (won't|will not)|"
     r"unable to (help|assist|comply)|as an ai)\b",
     re.IGNORECASE,
 )
-_FENCE = re.compile(r"```(?:json|JSON)?\s*(.*?)```", re.DOTALL)
+
+#: Mentions of one candidate in prose ("Image 2", "the first image", "image B", "left one").
+_MENTION = re.compile(
+    r"\b(?:image|picture|candidate|option)\s*(?P<num>[12ab])\b"
+    r"|\b(?P<word>first|second|left|right)\b(?:\s+(?:image|one|picture|candidate))?",
+    re.IGNORECASE,
+)
+_BETTER = re.compile(
+    r"\b(better|superior|preferred|prefer(?:able)?|clearer|stronger|wins?|outperforms?|beats?|"
+    r"more (?:faithful|accurate|informative|vivid|appealing))\b",
+    re.IGNORECASE,
+)
+_WORSE = re.compile(r"\b(worse|inferior|weaker|loses?|less (?:faithful|accurate|clear))\b", re.I)
 
 
 def normalise_choice(value: object) -> Choice | None:
@@ -83,25 +110,94 @@ def normalise_choice(value: object) -> Choice | None:
         return Choice.SECOND
     if s in _TIE:
         return Choice.TIE
-    for words, choice in (
-        (("cannot decide", "can't decide", "tie", "equally", "neither"), Choice.TIE),
-        (("image 1", "first image", "the first", "image a", "left one"), Choice.FIRST),
-        (("image 2", "second image", "the second", "image b", "right one"), Choice.SECOND),
+    if any(w in s for w in ("cannot decide", "can't decide", "equally", "neither")) or re.search(
+        r"\btie\b", s
     ):
-        if any(w in s for w in words):
-            return choice
+        return Choice.TIE
+    return _choice_in_prose(s)
+
+
+def _mentioned(m: re.Match) -> Choice:
+    token = (m.group("num") or m.group("word") or "").lower()
+    return Choice.FIRST if token in ("1", "a", "first", "left") else Choice.SECOND
+
+
+def _choice_in_prose(s: str) -> Choice | None:
+    """The candidate a sentence prefers: the only one it names, or the winner of a comparison
+    ("Image 2 is better than Image 1", "I prefer the second image over the first", "Image 1 is
+    worse than Image 2"). None when it names both and the comparison is not understood."""
+    mentions = list(_MENTION.finditer(s))
+    named = {_mentioned(m) for m in mentions}
+    if not named:
+        return None
+    if len(named) == 1:
+        return named.pop()
+    first = mentions[0]
+    other = next(m for m in mentions if _mentioned(m) is not _mentioned(first))
+    between = s[first.end() : other.start()]
+    before = s[: first.start()]
+    if _WORSE.search(between):
+        return _mentioned(other)
+    if _BETTER.search(between) or _BETTER.search(before):
+        return _mentioned(first)
     return None
 
 
-def _json_candidates(text: str) -> list[str]:
-    """Substrings that may hold the answer's JSON, most likely first."""
-    out = [m.group(1) for m in _FENCE.finditer(text)]
-    out.append(text)
-    # The outermost {...} span, for JSON wrapped in prose.
-    start, end = text.find("{"), text.rfind("}")
-    if 0 <= start < end:
-        out.append(text[start : end + 1])
-    return out
+def strip_reasoning(text: str) -> str:
+    """``text`` without the reasoning a model wrote around its answer (``<think>`` blocks; an
+    unclosed one runs to the end; a closing tag without its opening drops what precedes it)."""
+    out = _THINK.sub(" ", text)
+    close = list(_THINK_CLOSE.finditer(out))
+    if close:  # the template put the opening tag into the prompt
+        out = out[close[-1].end() :]
+    opened = _THINK_OPEN.search(out)
+    if opened:  # cut off while still thinking
+        out = out[: opened.start()]
+    return out.strip()
+
+
+def content_text(content: object) -> str | None:
+    """The answer text of a message's ``content``: a string, or a list of parts whose text
+    parts are joined (reasoning parts are left out)."""
+    if content is None or isinstance(content, str):
+        return content
+    if isinstance(content, list):
+        texts = []
+        for part in content:
+            if isinstance(part, str):
+                texts.append(part)
+                continue
+            kind = _field(part, "type")
+            if kind in _REASONING_PARTS or _field(part, "thought") is True:
+                continue
+            text = _field(part, "text")
+            if isinstance(text, str):
+                texts.append(text)
+        return "\n".join(texts)
+    return str(content)
+
+
+def _field(part: object, name: str) -> object:
+    return part.get(name) if isinstance(part, dict) else getattr(part, name, None)
+
+
+def _json_values(text: str) -> list[object]:
+    """Every JSON object or array in ``text``, in order (nested ones inside their parent)."""
+    decoder = json.JSONDecoder()
+    out: list[object] = []
+    i = 0
+    while True:
+        starts = [j for j in (text.find("{", i), text.find("[", i)) if j >= 0]
+        if not starts:
+            return out
+        j = min(starts)
+        try:
+            value, end = decoder.raw_decode(text, j)
+        except ValueError:
+            i = j + 1
+            continue
+        out.append(value)
+        i = end
 
 
 def _choice_of(entry: object) -> tuple[Choice | None, str]:
@@ -209,19 +305,23 @@ def _keyed(line: str, aspects: Sequence[Aspect]) -> dict[str, Choice]:
     return out
 
 
-def parse_answer(text: str | None, aspects: Sequence[Aspect]) -> ParsedAnswer:
-    """The choices in a model's answer; raise :class:`UnreadableAnswer` when there are none."""
+def parse_answer(text: object, aspects: Sequence[Aspect]) -> ParsedAnswer:
+    """The choices in a model's answer; raise :class:`UnreadableAnswer` when there are none.
+
+    ``text`` is the message content: a string or a list of parts.
+    """
+    text = content_text(text)
     if text is None or not text.strip():
         raise UnreadableAnswer("unreadable", "empty answer")
-    stripped = text.strip()
+    stripped = strip_reasoning(text)
+    if not stripped:
+        raise UnreadableAnswer("unreadable", "only reasoning, no answer")
     if CANNOT_SEE.lower() in stripped.lower():
         raise UnreadableAnswer("blind", stripped[:200])
     parsed: ParsedAnswer | None = None
-    for cand in _json_candidates(stripped):
-        try:
-            data = json.loads(cand)
-        except (json.JSONDecodeError, ValueError):
-            continue
+    # The last JSON value that names the aspects: a draft followed by the final answer is read
+    # as the final answer.
+    for data in reversed(_json_values(stripped)):
         parsed = _from_json(data, aspects)
         if parsed is not None:
             break

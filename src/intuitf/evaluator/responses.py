@@ -9,6 +9,7 @@ from typing import Any
 
 import openai
 
+from intuitf.evaluator.parsing import content_text
 from intuitf.evaluator.prompts import (
     FOLLOW_UP_REFUSAL,
     FOLLOW_UP_TRUNCATED,
@@ -42,11 +43,15 @@ def _usage(resp: Any) -> tuple[int, int]:
 
 
 def _message(resp: Any) -> tuple[str | None, str | None, str | None]:
+    """(answer text, refusal, finish reason) of a completion. Content given as a list of parts
+    is joined from its text parts; reasoning fields (``reasoning_content``, ``reasoning``) are
+    not the answer and are left out."""
     choices = getattr(resp, "choices", None) or []
     if not choices:
         return None, None, None
     msg = choices[0].message
-    return getattr(msg, "content", None), getattr(msg, "refusal", None), choices[0].finish_reason
+    content = content_text(getattr(msg, "content", None))
+    return content, getattr(msg, "refusal", None), choices[0].finish_reason
 
 
 def _retry_after(response: Any) -> float | None:
