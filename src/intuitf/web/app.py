@@ -285,6 +285,7 @@ def create_app(
         routes_candidates,
         routes_info,
         routes_runs,
+        routes_texture,
         routes_volumes,
         view_socket,
     )
@@ -359,7 +360,9 @@ def create_app(
             500, f"The server failed ({type(exc).__name__}).", "See the server's log."
         )
 
-    for module in (routes_info, routes_volumes, routes_runs, routes_candidates, view_socket):
+    for module in (
+        routes_info, routes_volumes, routes_texture, routes_runs, routes_candidates, view_socket
+    ):
         app.include_router(module.router)
 
     @app.get("/", include_in_schema=False)
