@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests" / "render"))  # vtkref: the VTK scene the tests use
+sys.path.insert(0, str(ROOT / "tests"))  # helpers.vtkref: the VTK scene the tests use
 
 from intuitf.render import Camera, VolumeRenderer  # noqa: E402
 from intuitf.tf import Gaussian, GaussianTF  # noqa: E402
@@ -94,7 +94,7 @@ def bench_volume(name, vol, tfs, sizes, use_vtk: bool, sample_distance: float = 
             if shading:
                 line += f" | gradient (once) {tg * 1e3:.0f} ms"
             if use_vtk:
-                from vtkref import VTKScene
+                from helpers.vtkref import VTKScene
 
                 scene = VTKScene(r, "fixed")
                 scene.render(tfs[0], cam)
@@ -234,7 +234,7 @@ def bench_cuda_config(vol, size, shading, tfs, args, peak, vtk_ok) -> dict:
         row["attr_maxdiff"] = float(np.abs(a_gpu - a_cpu).max())
         del ccache, cpu
     if vtk_ok:
-        from vtkref import VTKScene
+        from helpers.vtkref import VTKScene
 
         ref = VolumeRenderer(vol, device="cpu", **kw)
         scene = VTKScene(ref, "gpu")
@@ -298,7 +298,7 @@ def cuda_main(args) -> None:
     )
     vtk_ok = not args.no_vtk
     if vtk_ok:
-        from vtkref import vtk_available
+        from helpers.vtkref import vtk_available
 
         why = vtk_available()
         if why:
@@ -476,7 +476,7 @@ def main() -> None:
     tfs = random_tfs(10 if args.quick else 50)
     use_vtk = not args.no_vtk
     if use_vtk:
-        from vtkref import vtk_available
+        from helpers.vtkref import vtk_available
 
         reason = vtk_available()
         if reason:

@@ -10,13 +10,14 @@ import signal
 import sqlite3
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
 
+from helpers.waiting import wait_for
 from intuitf.batch import BatchRequest, run_batch
 from intuitf.imageio import load_image
+from intuitf.session.lock import in_use
 from intuitf.testing.fake_mllm import FakeMLLMServer, Latency
 
 TINY = dict(population=6, generations=2, image_size=32, output_size=48, top_k=1, seed=1,
@@ -174,14 +175,18 @@ def test_killed_batch_resumes_with_no_paid_call_repeated(
            "--per-worker", "2", "-o", str(root), *tiny["args"]]  # fmt: skip
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
-    deadline = time.time() + 240
-    while time.time() < deadline and not list((root / "runs").glob("*/checkpoint.json")):
-        time.sleep(0.05)
-    time.sleep(0.3)  # into the middle of the next generations
+    wait_for(lambda: list((root / "runs").glob("*/checkpoint.json")), timeout=240,
+             what="a finished generation")  # fmt: skip
+    # Into the middle of the next generations: more questions asked since that checkpoint.
+    asked = server.stats.requests
+    wait_for(lambda: server.stats.requests > asked, timeout=60, what="the next question")
     proc.send_signal(signal.SIGKILL)
     proc.wait(timeout=30)
     assert list((root / "runs").glob("*/checkpoint.json")), "no generation finished before the kill"
-    time.sleep(1.0)  # the workers die with the batch (their run folders' locks go with them)
+    # The workers die with the batch, and their run folders' locks go with them.
+    for folder in (root / "runs").iterdir():
+        if folder.is_dir():
+            wait_for(lambda f=folder: not in_use(f), timeout=60, what=f"{folder}'s lock")
     asked = server.stats.requests
     answered = _answers(root)
 

@@ -8,12 +8,12 @@ import signal
 import sqlite3
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from helpers.waiting import wait_for
 from intuitf.testing.fake_mllm import FakeMLLMServer
 
 COMMON = [
@@ -126,10 +126,11 @@ def test_killed_run_resumes_with_nothing_repeated(tmp_path):
             stderr=subprocess.DEVNULL,
             env=env,
         )
-        deadline = time.time() + 180
-        while time.time() < deadline and not _generations(run):
-            time.sleep(0.05)
-        time.sleep(0.15)  # let it get into the middle of the next generation
+        wait_for(lambda: _generations(run), timeout=180, what="a finished generation")
+        # Into the middle of the next generation: some of its questions asked (not all, as the
+        # kill lands on the first one the server sees).
+        asked = srv.stats.requests
+        wait_for(lambda: srv.stats.requests > asked, timeout=60, what="the next question")
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=30)
         assert _generations(run), "the run never finished a generation"
@@ -165,9 +166,7 @@ def test_ctrl_c_saves_and_says_how_to_resume(tmp_path):
             text=True,
             env=dict(os.environ, PYTHONUNBUFFERED="1"),
         )
-        deadline = time.time() + 180
-        while time.time() < deadline and not (run / "checkpoint.json").exists():
-            time.sleep(0.05)
+        wait_for((run / "checkpoint.json").exists, timeout=180, what="the first checkpoint")
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=60)
         assert proc.returncode == 130, (out, err)

@@ -7,8 +7,8 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import rank_by_target
 
+from helpers.ranking import rank_by_target
 from intuitf.explorer import Bounds, Candidate, GeneticExplorer
 from intuitf.explorer.genome import near_duplicate
 from intuitf.tf import Gaussian, GaussianTF

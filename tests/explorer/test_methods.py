@@ -6,8 +6,8 @@ import json
 
 import numpy as np
 import pytest
-from conftest import lut_distance, rank_by_target
 
+from helpers.ranking import lut_distance, rank_by_target
 from intuitf.explorer import (
     METHODS,
     Bounds,

@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 import pytest
-from conftest import random_tf, tooth_tf
 
+from helpers.tfs import random_tf, tooth_tf
 from intuitf.errors import RenderError
 from intuitf.render import Camera, SampleCache, VolumeRenderer
 from intuitf.tf import Gaussian, GaussianTF

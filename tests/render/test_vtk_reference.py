@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import tooth_tf
-from vtkref import VTKScene, vtk_available
 
+from helpers.tfs import tooth_tf
+from helpers.vtkref import VTKScene, vtk_available
 from intuitf.render import Camera, VolumeRenderer
 from intuitf.tf import Gaussian, GaussianTF
 

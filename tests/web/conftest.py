@@ -11,7 +11,8 @@ import os
 from pathlib import Path
 
 import pytest
-from browser_util import CHROMIUM, CHROMIUM_ARGS, skip_reason, start_server, stop_server
+
+from helpers.browser import CHROMIUM, CHROMIUM_ARGS, skip_reason, start_server, stop_server
 
 
 @pytest.fixture(scope="module")

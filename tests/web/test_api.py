@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 from PIL import Image
-from web_backend_util import AUTH, SMALL, make_app, wait_run
+
+from helpers.web_backend import AUTH, SMALL, make_app, wait_run
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

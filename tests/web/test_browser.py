@@ -606,7 +606,7 @@ def test_volume_upload_and_a_volume_that_does_not_load(page, tmp_path):
 
 
 def test_a_stopped_server_is_a_message(browser, tmp_path):
-    from browser_util import start_server, stop_server
+    from helpers.browser import start_server, stop_server
 
     server = start_server(tmp_path)
     try:

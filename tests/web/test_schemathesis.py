@@ -13,7 +13,8 @@ schemathesis = pytest.importorskip("schemathesis")
 
 from hypothesis import HealthCheck, settings  # noqa: E402
 from schemathesis.checks import not_a_server_error  # noqa: E402
-from web_backend_util import AUTH, make_app  # noqa: E402
+
+from helpers.web_backend import AUTH, make_app  # noqa: E402
 
 _app_holder: dict = {}
 

@@ -10,8 +10,8 @@ import pytest
 from fastapi.testclient import TestClient
 from PIL import Image
 from starlette.testclient import WebSocketDenialResponse
-from web_backend_util import AUTH, TOKEN, make_app, wait_run
 
+from helpers.web_backend import AUTH, TOKEN, make_app, wait_run
 from intuitf.web.security import CSP
 
 ROUTES = ["/", "/api/info", "/api/volumes", "/api/runs", "/api/tree", "/openapi.json", "/docs",

@@ -15,7 +15,8 @@ import httpx
 import numpy as np
 import pytest
 from PIL import Image
-from web_backend_util import AUTH, TOKEN, LiveServer, make_app, wait_run
+
+from helpers.web_backend import AUTH, TOKEN, LiveServer, make_app, wait_run
 
 
 @pytest.fixture(scope="module")

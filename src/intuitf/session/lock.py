@@ -182,3 +182,25 @@ def _parse(text: str) -> dict | None:
     except json.JSONDecodeError:
         return {"command": "unknown (unreadable lock record)"}
     return rec if isinstance(rec, dict) else None
+
+
+def in_use(root: str | os.PathLike) -> bool:
+    """Whether a process holds the lock of run folder ``root`` (asked without taking it)."""
+    if fcntl is None:  # pragma: no cover - no locks on this system
+        return False
+    path = Path(root) / LOCK_NAME
+    if not path.exists():
+        return False
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except OSError:
+        return True
+    else:
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        return False
+    finally:
+        os.close(fd)

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from intuitf.errors import SessionError
+from intuitf.session.lock import in_use
 from intuitf.session.rundir import RunDirectory
 from intuitf.tf import GaussianTF
 
@@ -132,7 +133,7 @@ class RunStore:
         ckpt = _read_json(rd.checkpoint) or {}
         if ckpt.get("plan"):
             plan = ckpt["plan"]
-        if _in_use(rd.root):
+        if in_use(rd.root):
             status = "running"
         elif ended is not None:
             status = str(ended.get("reason", "stopped"))
@@ -339,27 +340,3 @@ def _read_json(path: Path) -> dict | None:
         return json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
-
-
-def _in_use(root: Path) -> bool:
-    """Whether a process holds the run folder's lock (without taking it)."""
-    try:
-        import fcntl
-    except ImportError:  # pragma: no cover - no locks on this system
-        return False
-    path = root / ".lock"
-    if not path.exists():
-        return False
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:
-        return False
-    try:
-        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
-    except OSError:
-        return True
-    else:
-        fcntl.flock(fd, fcntl.LOCK_UN)
-        return False
-    finally:
-        os.close(fd)

@@ -1,11 +1,10 @@
-"""Shared helpers: a cheap synthetic judge that ranks TFs by closeness to a hidden target."""
+"""A cheap synthetic judge: ranks TFs by closeness of their LUTs to a hidden target."""
 
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
-from intuitf.tf import Gaussian, GaussianTF
+from intuitf.tf import GaussianTF
 
 
 def lut_distance(tf: GaussianTF, target_lut: np.ndarray) -> float:
@@ -17,16 +16,6 @@ def lut_distance(tf: GaussianTF, target_lut: np.ndarray) -> float:
 
 
 def rank_by_target(candidates, target_lut: np.ndarray) -> list[str]:
+    """Candidate ids, closest to the target first."""
     d = [(lut_distance(c.tf, target_lut), c.id) for c in candidates]
     return [cid for _, cid in sorted(d)]
-
-
-@pytest.fixture
-def target_tf() -> GaussianTF:
-    return GaussianTF(
-        (
-            Gaussian(0.22, 0.03, 0.04, (0.9, 0.6, 0.5)),
-            Gaussian(0.45, 0.02, 0.25, (0.8, 0.2, 0.2)),
-            Gaussian(0.78, 0.04, 0.6, (0.95, 0.95, 0.85)),
-        )
-    )
