@@ -165,10 +165,15 @@ class SessionInteraction:
     def _apply_human(self, action: str, v: HumanVerdict) -> None:
         """Re-rank the last generation with every active verdict and re-tell the Explorer.
 
-        While a generation is being judged, the verdict waits for that generation's end.
+        While a generation is being judged (a paused run, say), the shown ranking of the last
+        generation is refitted at once; the Explorer hears the verdict when that generation
+        ends (its tournament fit takes the stage's verdicts).
         """
-        if not self._stepping and self.last_ranking and self._pre_tell is not None:
-            self._retell()
+        if self.last_ranking and self._pre_tell is not None:
+            if self._stepping:
+                self.last_ranking, self.ratings = self._refit()
+            else:
+                self._retell()
         self._journal({"type": "human", "action": action, "verdict": v.to_dict()})
         if not self._stepping:
             self._checkpoint()
@@ -189,18 +194,7 @@ class SessionInteraction:
         (from its state before the first telling, so undoing every verdict restores it)."""
         from intuitf.explorer import explorer_from_state
 
-        ids = list(self.last_ranking)
-        model_ranking = list(self._model_ranking or ids)
-        human = self._human_games(self._judged_stage)
-        if human:
-            ranking, ratings = refit_ranking(
-                ids,
-                self._judged_games + human,
-                tiebreak=model_ranking,
-                stated=stated_orders(self.human, self._judged_stage),
-            )
-        else:
-            ranking, ratings = model_ranking, dict(self._model_ratings or self.ratings)
+        ranking, ratings = self._refit()
         palette = getattr(self.explorer, "palette", None)
         hints = getattr(self.explorer, "hints", None)
         self.explorer = explorer_from_state(self._pre_tell)
@@ -213,6 +207,20 @@ class SessionInteraction:
             if hints is not None:
                 self.explorer.hints = hints
         self.last_ranking, self.ratings = ranking, ratings
+
+    def _refit(self) -> tuple[list[str], dict[str, float]]:
+        """The last generation's ranking and ratings with every active verdict of a person."""
+        ids = list(self.last_ranking)
+        model_ranking = list(self._model_ranking or ids)
+        human = self._human_games(self._judged_stage)
+        if not human:
+            return model_ranking, dict(self._model_ratings or self.ratings)
+        return refit_ranking(
+            ids,
+            self._judged_games + human,
+            tiebreak=model_ranking,
+            stated=stated_orders(self.human, self._judged_stage),
+        )
 
     _model_ranking: list[str] | None = None
     _model_ratings: dict[str, float] | None = None

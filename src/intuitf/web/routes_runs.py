@@ -281,10 +281,47 @@ def _thumbnail_url(name: str, g: int) -> str:
     return f"/api/runs/{name}/generations/{g}/thumbnail"
 
 
+INTERRUPTED = (
+    "The server stopped while this run was going (a crash or a kill); "
+    "Resume goes on from its last finished generation."
+)
+
+
+def status_now(web, info: dict[str, Any]) -> dict[str, Any]:
+    """A run's listing as a person should read it now.
+
+    A run that has ended but still writes its best pictures and exports holds its folder's
+    lock, so the store says "running": its outcome is what counts. A run that neither ended
+    (no end in its journal) nor is held by any process was cut off by a crash: "interrupted".
+    """
+    status = info.get("status")
+    entry = web.registry.entry(info["name"])
+    if status == "running" and entry is not None and not entry.live:
+        outcome = entry.outcome
+        reason = getattr(outcome, "reason", None) or "stopped"
+        message = getattr(outcome, "message", None) or info.get("message", "")
+        return {**info, "status": reason, "message": message}
+    if status == "stopped" or (status == "new" and _was_started(web, info["name"])):
+        return {**info, "status": "interrupted", "message": INTERRUPTED}
+    return info
+
+
+def _was_started(web, name: str) -> bool:
+    from intuitf.session import RunDirectory
+
+    try:
+        path = RunDirectory(web.store.path_of(name)).events
+        with open(path, "rb") as f:
+            return b"run_started" in f.read(1 << 20)
+    except (OSError, IntuitfError):
+        return False
+
+
 # -- runs ----------------------------------------------------------------------------------------
 @router.get("/runs")
 def list_runs(request: Request) -> list[dict[str, Any]]:
-    return [r.to_dict() for r in state(request).store.runs()]
+    web = state(request)
+    return [status_now(web, r.to_dict()) for r in web.store.runs()]
 
 
 @router.post("/runs", response_model=NameOut, status_code=201)
@@ -306,9 +343,11 @@ async def start_run(request: Request, body: RunIn) -> dict:
 
 @router.get("/tree")
 def tree(request: Request) -> list[dict[str, Any]]:
-    nodes = state(request).store.tree()
+    web = state(request)
+    nodes = web.store.tree()
 
     def fix(node: dict) -> None:
+        node["run"] = status_now(web, node["run"])
         name = node["run"]["name"]
         for g in node["generations"]:
             g["thumbnail"] = _thumbnail_url(name, g["generation"]) if g.get("thumbnail") else None
@@ -329,6 +368,7 @@ async def run_detail(request: Request, name: str) -> dict[str, Any]:
     except IntuitfError:
         raise ApiError(404, f"There is no run {name!r}.", "Use a name from the run list.") from None
     where = await asyncio.to_thread(_run_view, web, name)
+    info_d = status_now(web, info.to_dict())
     live = web.registry.get(name)
     if live is not None:
         s = live.session
@@ -342,7 +382,7 @@ async def run_detail(request: Request, name: str) -> dict[str, Any]:
             ]
             return {
                 **where,
-                "info": info.to_dict(),
+                "info": info_d,
                 "snapshot": snap.to_dict(),
                 "gallery": gallery,
                 "progress": live.progress.to_dict(),
@@ -353,7 +393,7 @@ async def run_detail(request: Request, name: str) -> dict[str, Any]:
     cost = info.cost or {}
     return {
         **where,
-        "info": info.to_dict(),
+        "info": info_d,
         "snapshot": None,
         "gallery": gallery,
         "progress": {
@@ -365,7 +405,7 @@ async def run_detail(request: Request, name: str) -> dict[str, Any]:
             "calls": cost.get("calls", 0),
             "usd": cost.get("usd", 0.0),
             "seconds_left": None,
-            "status": info.status,
+            "status": info_d["status"],
             "last_error": None,
         },
     }
