@@ -31,6 +31,7 @@ COMMAND_MODULES = [
     "intuitf.cli.optimize_cmds",
     "intuitf.cli.serve_cmds",
     "intuitf.cli.batch_cmds",
+    "intuitf.cli.mcp_cmds",
 ]
 
 for _name in COMMAND_MODULES:
