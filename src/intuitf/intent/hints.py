@@ -29,12 +29,15 @@ the selection says where, so the colour and opacity apply to the selected Gaussi
 from __future__ import annotations
 
 import re
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from intuitf.evaluator.types import Intent
 from intuitf.intent.colours import NAMED_COLOURS, named_colours
+from intuitf.intent.parts import PART_KINDS, kind_of, match_parts
+from intuitf.intent.structures import StructureMap
 
 RGB = tuple[float, float, float]
 
@@ -50,8 +53,18 @@ class _Term:
     hu: tuple[float, float] | None = None  # Hounsfield range, for CT in HU
 
 
-#: Materials by the words that name them. Longer phrases come first (matched first).
+#: Materials by the words that name them. Longer phrases come first (matched first). Parts
+#: (role "part": a pot, the leaves, the crown ...) are placed on the structure the words name
+#: (:mod:`intuitf.intent.parts`); they come first, so at one place they win over a material.
 TERMS: tuple[_Term, ...] = (
+    _Term("pot", PART_KINDS["container"][0], 3.0, "part"),
+    _Term("branch", PART_KINDS["stem"][0], 3.0, "part"),
+    _Term("leaves", PART_KINDS["foliage"][0], 3.0, "part"),
+    _Term("crown", r"crowns?", 6.5, "part"),
+    _Term("root", PART_KINDS["root"][0], 5.5, "part"),
+    _Term("outer part", r"outer(most)? (parts?|layers?|walls?)|casing|housing", 1.0, "part"),
+    _Term("inner part", r"inner(most)? (parts?|structures?|components?)|interior parts?", 7.0,
+          "part"),
     _Term("soft tissue", r"soft[- ]tissues?", 2.3, "soft", (20, 80)),
     _Term("white matter", r"white matter", 2.4, "soft", (20, 40)),
     _Term("grey matter", r"gr[ae]y matter", 2.3, "soft", (30, 45)),
@@ -181,11 +194,14 @@ class MaterialHint:
     center: float | None = None
     spread: float = 0.03
     placed_by: str = ""
+    structure: int | None = None  # the structure it was placed on (a part word)
+    thin: bool = False  # that structure is thin, plate-like or scattered: it needs more opacity
 
     @property
     def height_band(self) -> tuple[float, float] | None:
         """The Gaussian heights the look asks for (None: hidden, height 0)."""
-        bands = SURFACE_BANDS if self.role in ("boundary", "skin") else HEIGHT_BANDS
+        surface = self.role in ("boundary", "skin") or self.thin
+        bands = SURFACE_BANDS if surface else HEIGHT_BANDS
         return bands.get(self.opacity, bands[None])
 
     def to_explorer(self) -> dict:
@@ -214,6 +230,8 @@ class MaterialHint:
                 lo, hi = value_range
                 v = lo + v * (hi - lo)
             where = f", at {v:.4g} ({self.placed_by})"
+            if self.structure is not None:
+                where += f" on S{self.structure}"
         return f'"{self.words}": ' + ", ".join(parts) + where
 
 
@@ -361,9 +379,13 @@ def place_hints(
     counts: np.ndarray,
     value_range: tuple[float, float] = (0.0, 1.0),
     dtype: str | None = None,
+    structures: StructureMap | None = None,
 ) -> TextHints:
     """``parsed`` with every hint placed on the volume whose histogram is ``counts``.
 
+    Words naming parts (pot, leaves, crown, outer part ...) go to the structure of
+    ``structures`` they name (:func:`intuitf.intent.parts.match_parts`): the hint sits on
+    that structure's values. Without a structure map they are placed by role like materials.
     CT in Hounsfield units (:func:`is_hounsfield`): each material at its HU range. Otherwise
     by role among the histogram's materials (see the module docstring), then in density
     order.
@@ -379,7 +401,24 @@ def place_hints(
     mats = find_materials(c, max_materials=6)
     layout = _Layout.of(c, mats)
     placed: list[MaterialHint] = []
+    parts: dict = {}
+    if structures is not None:
+        kinds = [kind_of(h.words) for h in parsed.hints if h.role == "part"]
+        parts = match_parts([k for k in kinds if k], structures)
     for h in parsed.hints:
+        kind = kind_of(h.words) if h.role == "part" else None
+        if kind is not None and kind in parts:
+            st = parts[kind]
+            a, b = st.value_range
+            # Seen where its surface is: the lower part of its values, where it meets what
+            # surrounds it, and wide enough to hold the rest of them.
+            center = a + 0.35 * (b - a)
+            spread = max(0.012, (b - a) / 4.0)
+            thin = st.shape in ("thin", "branching", "scattered", "plate")
+            placed.append(_with(h, center=float(center), spread=float(spread),
+                                placed_by="structure", structure=st.id, thin=thin))  # fmt: skip
+            continue
+        role = _PART_ROLE.get(kind or "", h.role) if h.role == "part" else h.role
         term_hu = next((t.hu for t in TERMS if t.material == h.material and t.hu), None)
         if hu and term_hu is not None:
             a, b = (float(np.clip((v - lo) / span, 0.0, 1.0)) for v in term_hu)
@@ -387,12 +426,20 @@ def place_hints(
             if h.material == "bone":  # what shows bone is its surface, near the lower end
                 center = a + 0.25 * (b - a)
         else:
-            center, spread = layout.place(h.role)
-            how = "density order" if h.role not in ("main", "boundary") else h.role
+            center, spread = layout.place(role)
+            how = "density order" if role not in ("main", "boundary") else role
         placed.append(_with(h, center=float(center), spread=float(spread), placed_by=how))
     if not hu:
         placed = _keep_density_order(placed, layout)
     return TextHints(parsed.text, placed, list(parsed.unknown), list(parsed.notes))
+
+
+#: Without a structure map, a part is placed like the material it usually is.
+_PART_ROLE = {
+    "container": "top", "stem": "main", "foliage": "low", "crown": "top", "root": "dentin",
+    "dentin": "dentin", "outer": "boundary", "inner": "top", "skin": "skin", "bone": "bone",
+    "vessel": "vessels",
+}  # fmt: skip
 
 
 def _with(h: MaterialHint, **kw) -> MaterialHint:
@@ -540,8 +587,12 @@ def _keep_density_order(hints: list[MaterialHint], layout: _Layout) -> list[Mate
 # -- for the Session ---------------------------------------------------------------------------
 
 
-def intent_hints(intent: Intent, volume=None) -> TextHints:
-    """The hints of an intent's text, placed on ``volume`` when given (not for an edit)."""
+def intent_hints(intent: Intent, volume=None, structures: StructureMap | None = None) -> TextHints:
+    """The hints of an intent's text, placed on ``volume`` when given (not for an edit).
+
+    ``structures`` is the volume's structure map; by default it is built from the volume
+    (:func:`structure_map_of`, kept for the volume's lifetime) when the text names parts.
+    """
     parsed = parse_text(intent.text)
     if intent.kind == "edit":
         # The selection says where: every hint applies to the selected features.
@@ -552,9 +603,36 @@ def intent_hints(intent: Intent, volume=None) -> TextHints:
     if volume is None:
         return parsed
     counts, _ = volume.histogram()
+    if structures is None and any(h.role == "part" for h in parsed.hints):
+        structures = structure_map_of(volume)
     return place_hints(
-        parsed, counts, tuple(volume.value_range), getattr(volume, "original_dtype", None)
-    )
+        parsed, counts, tuple(volume.value_range), getattr(volume, "original_dtype", None),
+        structures=structures,
+    )  # fmt: skip
+
+
+_MAPS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def structure_map_of(volume) -> StructureMap:
+    """The structure map of ``volume`` (built once per volume object and kept with it).
+
+    A map given to :func:`remember_structure_map` (one read from disk, or one a model named)
+    is used instead of building one.
+    """
+    smap = _MAPS.get(volume)
+    if smap is None:
+        from intuitf.intent.structures import build_structure_map
+
+        counts, _ = volume.histogram()
+        smap = build_structure_map(volume.data, counts, tuple(volume.spacing))
+        _MAPS[volume] = smap
+    return smap
+
+
+def remember_structure_map(volume, smap: StructureMap) -> None:
+    """Use ``smap`` as ``volume``'s structure map from now on (a cached or named one)."""
+    _MAPS[volume] = smap
 
 
 def _edit_hint(text: str) -> MaterialHint:
@@ -568,14 +646,16 @@ def _edit_hint(text: str) -> MaterialHint:
     )  # fmt: skip
 
 
-def explorer_hints(intent: Intent, volume=None) -> list[dict]:
+def explorer_hints(
+    intent: Intent, volume=None, structures: StructureMap | None = None
+) -> list[dict]:
     """The hints the Explorer takes for ``intent`` on ``volume`` (empty: none understood).
 
     With placed hints, the background's values get one more: hidden, unless the words name
     air. Nobody asks for the empty space around the object to be painted, and a faint
     Gaussian there is a veil over the whole volume box.
     """
-    th = intent_hints(intent, volume)
+    th = intent_hints(intent, volume, structures)
     out = [h.to_explorer() for h in th.hints if h.center is not None or intent.kind == "edit"]
     placed = [h for h in th.hints if h.center is not None]
     if placed and volume is not None and not any(h.role == "air" for h in placed):

@@ -1,0 +1,94 @@
+"""The structure map: materials split into parts with descriptors, and words matched to them."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from helpers.data import DATA
+from intuitf.evaluator.types import Intent
+from intuitf.intent.hints import explorer_hints, intent_hints
+from intuitf.intent.parts import kind_of, match_parts
+from intuitf.intent.structures import StructureMap, build_structure_map
+
+
+def potted_tree(n: int = 48, seed: int = 0) -> np.ndarray:
+    """A small synthetic bonsai, z up: a dense bowl at the bottom, a mid-density trunk rising
+    from it, low-density leaves scattered at the top, noisy air around."""
+    rng = np.random.default_rng(seed)
+    z, y, x = np.mgrid[0:n, 0:n, 0:n].astype(np.float32)
+    c = (n - 1) / 2.0
+    r = np.sqrt((x - c) ** 2 + (y - c) ** 2)
+    data = rng.normal(0.03, 0.01, (n, n, n)).astype(np.float32)
+    bowl = (z >= 2) & (z <= 12) & (r <= 18) & ((r >= 15) | (z <= 4))
+    data[bowl] = 0.85
+    trunk = (z > 4) & (z < 38) & (np.sqrt((x - c) ** 2 + (y - c) ** 2) <= 2.0)
+    data[trunk] = 0.5
+    for _ in range(120):
+        pz, py, px = rng.integers(28, n - 3), rng.integers(6, n - 6), rng.integers(6, n - 6)
+        data[pz : pz + 2, py : py + 2, px : px + 2] = 0.2
+    return np.clip(data, 0, 1)
+
+
+def test_a_potted_tree_splits_into_pot_trunk_and_leaves():
+    smap = build_structure_map(potted_tree())
+    assert smap.up_axis == 2 and smap.up_sign == 1
+    bg = smap.background()
+    assert len(bg) == 1 and bg[0].value_range[1] < 0.1
+    fg = smap.foreground()
+    pot = next(s for s in fg if s.value_range[0] > 0.7)
+    trunk = next(s for s in fg if 0.4 < s.center < 0.6)
+    leaves = next(s for s in fg if s.center < 0.3)
+    assert pot.position == "bottom" and pot.shape in ("plate", "shell", "blob")
+    assert trunk.shape in ("thin", "elongated") and trunk.extents[0] > 3 * trunk.extents[1]
+    assert leaves.shape == "scattered" and leaves.position == "top" and leaves.pieces > 20
+    # Words find them by their descriptors, each on its own material.
+    got = match_parts(["container", "stem", "foliage"], smap)
+    assert (got["container"].id, got["stem"].id, got["foliage"].id) == (
+        pot.id, trunk.id, leaves.id,
+    )  # fmt: skip
+
+
+def test_the_map_round_trips_and_names_win():
+    smap = build_structure_map(potted_tree())
+    again = StructureMap.from_dict(smap.to_dict())
+    assert again.to_dict() == smap.to_dict()
+    trunk = next(s for s in smap.foreground() if 0.4 < s.center < 0.6)
+    # A structure a model named "pot" is the pot, whatever its descriptors say.
+    named = smap.named({trunk.id: "the pot"})
+    assert match_parts(["container"], named)["container"].id == trunk.id
+    assert kind_of("golden leaves") == "foliage" and kind_of("the casing") == "outer"
+
+
+def test_part_words_land_on_their_structures():
+    from intuitf.volume import Volume
+
+    vol = Volume.from_array(potted_tree(), value_range=(0.0, 1.0))
+    th = intent_hints(Intent(kind="text", text="brown pot, silver branch and golden leaves"), vol)
+    by = {h.material: h for h in th.hints}
+    assert set(by) == {"pot", "branch", "leaves"}
+    assert all(h.placed_by == "structure" for h in th.hints)
+    assert 0.75 < by["pot"].center < 0.9
+    assert 0.4 < by["branch"].center < 0.6
+    assert 0.12 < by["leaves"].center < 0.3
+    hints = explorer_hints(Intent(kind="text", text="brown pot, golden leaves"), vol)
+    assert any(h["name"] == "background" and h["hidden"] for h in hints)
+
+
+@pytest.mark.skipif(not (DATA / "bonsai_256x256x256_uint8.raw.gz").exists(), reason="no data")
+def test_real_bonsai_stands_along_y_and_its_words_land():
+    from intuitf.volume import load_volume
+
+    vol = load_volume(DATA / "bonsai_256x256x256_uint8.raw.gz", max_dim=96)
+    th = intent_hints(
+        Intent(kind="text", text="A potted tree with brown pot, silver branch and golden leaves"),
+        vol,
+    )
+    by = {h.material: h for h in th.hints}
+    # Looked at in slices: pot wall >= 0.73, trunk and soil 0.27-0.72, leaves 0.13-0.26.
+    assert by["pot"].center > 0.72
+    assert 0.3 < by["branch"].center < 0.7
+    assert 0.12 < by["leaves"].center < 0.27
+    from intuitf.intent.hints import structure_map_of
+
+    assert structure_map_of(vol).up_axis == 1  # the tree grows along +y in this scan
