@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy.stats import kendalltau
 
-from intuitf.errors import BudgetExhausted, JudgeError
+from intuitf.errors import BudgetExhausted
 from intuitf.evaluator.tournament import (
     SwissTournament,
     TournamentResult,
@@ -230,10 +230,9 @@ class FailingJudge(OracleJudge):
         return v
 
 
-@pytest.mark.parametrize(
-    "exc", [BudgetExhausted("Budget spent.", hint="Raise it."), JudgeError("Server gone.")]
-)
+@pytest.mark.parametrize("exc", [BudgetExhausted("Budget spent.", hint="Raise it.")])
 def test_failure_mid_round_keeps_every_paid_verdict(exc):
+    # (A JudgeError on one match no longer stops the tournament: test_tournament_faults.py.)
     n = 16  # 8 matches a round; fail on the 3rd call of round 2
     judge = FailingJudge(exc, fail_at=11)
     t = SwissTournament(judge, ASPECTS, seed=0)

@@ -24,7 +24,12 @@ from pathlib import Path
 from typing import Any
 
 from intuitf.batch.plan import VolumeItem, plan_volumes
-from intuitf.batch.runner import BatchConfig, drive
+from intuitf.batch.runner import (
+    DEFAULT_MAX_FAILURES,
+    DEFAULT_RAY_TIMEOUT,
+    BatchConfig,
+    drive,
+)
 from intuitf.batch.summary import DEFAULT_FLAG_BELOW, build_summary, write_summary
 from intuitf.errors import IntuitfError
 
@@ -56,6 +61,12 @@ class BatchRequest:
     max_concurrency: int | None = None
     rate_per_min: float | None = None
     flag_below: float = DEFAULT_FLAG_BELOW
+    #: How many times a volume that failed (judge down, an error, its worker lost) goes again.
+    max_failures: int = DEFAULT_MAX_FAILURES
+    #: Seconds to wait for a Ray cluster to answer before giving up.
+    ray_timeout: float = DEFAULT_RAY_TIMEOUT
+    #: On a resume: "ray" or "pool" when the backend was taken from batch.json (None: given).
+    backend_from_record: str | None = None
 
 
 #: Fields of batch.json that make the batch what it is: a rerun must not change them.
@@ -179,6 +190,8 @@ class BatchJob:
                 "reader": req.reader,
                 "carry": req.carry,
                 "budget": {"calls": req.budget_calls, "usd": req.budget_usd},
+                # Where it runs: a resume without --ray runs there again.
+                "backend": {"ray": req.ray},
                 "flag_below": req.flag_below,
                 "created": record.get("created") or time.strftime("%Y-%m-%dT%H:%M:%S%z"),
                 "updated": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
@@ -220,6 +233,8 @@ class BatchJob:
             stop_when=stop_when,
             max_concurrency=req.max_concurrency,
             rate_per_min=req.rate_per_min,
+            max_failures=req.max_failures,
+            ray_timeout=req.ray_timeout,
         )
         wall = time.perf_counter() - t0
         return self.summarise(results, wall)
@@ -262,6 +277,10 @@ def _request_from_record(root: Path, req: BatchRequest) -> BatchRequest:
     """A resume: the batch as batch.json records it, with this command's run options."""
     rec = json.loads((root / "batch.json").read_text(encoding="utf-8"))
     t = rec["template"]
+    ray, backend_from_record = req.ray, None
+    if ray is None:  # no --ray given: where the batch was started
+        ray = (rec.get("backend") or {}).get("ray")
+        backend_from_record = "pool" if ray is None else "ray"
     judge = t.get("judge", {})
     intent = t.get("intent", {})
     return BatchRequest(
@@ -283,9 +302,12 @@ def _request_from_record(root: Path, req: BatchRequest) -> BatchRequest:
         budget_usd=req.budget_usd,
         workers=req.workers,
         per_worker=req.per_worker,
-        ray=req.ray,
+        ray=ray,
         max_concurrency=req.max_concurrency,
         rate_per_min=req.rate_per_min,
+        max_failures=req.max_failures,
+        ray_timeout=req.ray_timeout,
+        backend_from_record=backend_from_record,
         flag_below=req.flag_below
         if req.flag_below != DEFAULT_FLAG_BELOW
         else rec.get("flag_below", DEFAULT_FLAG_BELOW),

@@ -17,6 +17,11 @@ the reference picture, calls, cost, time) is written to ``DIR/results/KEY.json``
 are skipped, unfinished ones resumed from their checkpoints, with every answer already paid for
 taken from their verdict stores. A volume that cannot be read is reported and skipped.
 
+**Failures.** A volume whose run stops for its judge (the model server down) or fails with an
+error, or whose worker is lost, is tried again, up to ``max_failures`` more times in one pass
+(as Ray Tune's ``max_failures``), each retry a resume with nothing repeated and a little later
+than the last (2, 4, 8 ... s); only then is it reported failed.
+
 **Stopping.** Ctrl-C cancels every run between two matches (each is resumed later with nothing
 repeated); a killed batch takes its worker processes with it and resumes the same way.
 """
@@ -38,12 +43,20 @@ from pathlib import Path
 from typing import Any
 
 from intuitf.batch.plan import VolumeItem
-from intuitf.errors import IntuitfError
+from intuitf.errors import IntuitfError, RenderError, TransferFunctionError, VolumeError
 
 log = logging.getLogger(__name__)
 
 #: Statuses a volume can end a batch pass with.
 FINISHED = "completed"
+#: Statuses after which a volume is tried again (a resume), up to ``max_failures`` times.
+RETRYABLE = ("judge", "failed", "storage")
+#: How many times a volume is tried again after a failure, by default.
+DEFAULT_MAX_FAILURES = 2
+#: A volume's n-th retry waits this many seconds times 2**(n-1) (a judge may come back).
+RETRY_WAIT_S = 2.0
+#: Seconds to wait for a Ray cluster to answer (``--ray-timeout``).
+DEFAULT_RAY_TIMEOUT = 30.0
 RAY_HINT = 'pip install "intuitf[ray]" (or pip install ray)'
 
 
@@ -251,6 +264,9 @@ class WorkerCore:
         result["attempts"] = int(result.get("attempts") or 0)
         try:
             result = await self._run(item, result)
+        except (VolumeError, TransferFunctionError, RenderError) as exc:
+            # The volume itself is unusable: trying again would fail the same way.
+            result.update(status="failed", message=_message(exc), permanent=True)
         except IntuitfError as exc:
             result.update(status="failed", message=_message(exc))
         except Exception as exc:  # noqa: BLE001 - one volume's bug must not stop the batch
@@ -612,7 +628,8 @@ class RayBackend:
             except Exception as exc:  # noqa: BLE001 - the actor died (node lost, OOM, ...)
                 self.dead.add(w)
                 res = _base_result(item)
-                res.update(status="interrupted", message=f"The Ray worker was lost: {exc}")
+                res.update(status="interrupted", lost=True,
+                           message=f"The Ray worker was lost: {exc}")  # fmt: skip
                 out.append((w, res))
         return out
 
@@ -660,10 +677,13 @@ def drive(
     stop_when: Callable[[], bool] | None = None,
     max_concurrency: int | None = None,
     rate_per_min: float | None = None,
+    max_failures: int = DEFAULT_MAX_FAILURES,
+    ray_timeout: float = DEFAULT_RAY_TIMEOUT,
 ) -> dict[str, dict]:
     """Run every volume of ``items`` not already finished; returns results by key.
 
-    ``on_update(event, item, result)`` is called with "skipped", "started" and "done".
+    ``on_update(event, item, result)`` is called with "skipped", "started", "retry" (a volume
+    that failed goes again, ``max_failures`` times at most) and "done".
     ``max_concurrency`` (judge requests in flight) and ``rate_per_min`` (requests started per
     minute) hold for the whole batch: each of the W workers gets a W-th of them.
     ``stop_when()``, polled a few times a second, stops the batch like Ctrl-C when true.
@@ -685,7 +705,7 @@ def drive(
     if use_ray:
         ray = import_ray()
         if not ray.is_initialized():
-            _ray_init(ray, ray_address)
+            _ray_init(ray, ray_address, ray_timeout)
             started_ray = True
         n_workers = int(workers or max(1, int(ray.cluster_resources().get("CPU", 1.0))))
     else:
@@ -703,6 +723,31 @@ def drive(
     load = [0] * backend.workers
     running: dict[str, tuple[int, VolumeItem]] = {}
     stopping = False
+    failures: dict[str, int] = {}
+    #: When a volume that failed may go again (monotonic time), by key.
+    not_before: dict[str, float] = {}
+
+    def finished(it: VolumeItem, res: dict) -> None:
+        """A volume's run ended: record it, or queue it again if it failed and may retry."""
+        status = res.get("status")
+        retry = (status in RETRYABLE or res.get("lost")) and not res.get("permanent")
+        retry = retry and not stopping and not exhausted()
+        if retry and failures.get(it.key, 0) < max_failures:
+            failures[it.key] = failures.get(it.key, 0) + 1
+            res["retries"] = failures[it.key]
+            wait = RETRY_WAIT_S * 2.0 ** (failures[it.key] - 1)
+            not_before[it.key] = time.monotonic() + wait
+            pending.append(it)
+            notify("retry", it, res)
+            return
+        if failures.get(it.key):
+            res["retries"] = failures[it.key]
+            try:
+                write_result(config.root, res)
+            except IntuitfError:
+                pass
+        results[it.key] = res
+        notify("done", it, res)
 
     def exhausted() -> bool:
         return ledger is not None and config.uses_model and ledger.totals().exhausted
@@ -737,8 +782,13 @@ def drive(
                             results[it.key] = res
                             notify("done", it, res)
                         break
+                    now = time.monotonic()
+                    ready = [i for i in pending if not_before.get(i.key, 0.0) <= now]
+                    if not ready:
+                        break
                     w = min(free, key=lambda k: load[k])
-                    it = pending.popleft()
+                    it = ready[0]
+                    pending.remove(it)
                     backend.submit(w, it)
                     load[w] += 1
                     running[it.key] = (w, it)
@@ -748,8 +798,7 @@ def drive(
                     entry = running.pop(key, None)
                     if entry is not None:
                         load[entry[0]] -= 1
-                        results[key] = res
-                        notify("done", entry[1], res)
+                        finished(entry[1], res)
                 # Volumes of a worker process that died: reported, resumed by the next run.
                 for key, (w, it) in list(running.items()):
                     if not backend.alive(w):
@@ -759,11 +808,10 @@ def drive(
                             "status"
                         ):
                             res = _base_result(it)
-                        res.update(status="interrupted",
+                        res.update(status="interrupted", lost=True,
                                    message="Its worker process died; run the batch again to "
                                            "resume it.")  # fmt: skip
-                        results[key] = res
-                        notify("done", it, res)
+                        finished(it, res)
                 if getattr(backend, "fatal", None):
                     raise IntuitfError(f"A batch worker could not start: {backend.fatal[0]}")
             except KeyboardInterrupt:
@@ -781,16 +829,128 @@ def drive(
     return results
 
 
-def _ray_init(ray, address: str | None) -> None:
+def _ray_init(ray, address: str | None, timeout: float = DEFAULT_RAY_TIMEOUT) -> None:
+    """Start a local Ray instance, or join the one at ``address``, within ``timeout`` seconds.
+
+    An address that does not answer fails at once (a TCP connect first), a cluster that
+    accepts the connection but never completes the handshake after ``timeout`` seconds, and
+    a cluster that refuses this process's token says so, with what to do.
+    """
     kw: dict[str, Any] = {"log_to_driver": False, "configure_logging": False}
-    try:
-        if address in (None, "", "local"):
-            ray.init(num_cpus=os.cpu_count() or 1, include_dashboard=False, **kw)
-        else:
-            ray.init(address=address, **kw)
-    except Exception as exc:  # noqa: BLE001
+    local = address in (None, "", "local")
+    if not local and address != "auto":
+        _check_reachable(str(address), timeout)
+        _use_token_if_any()
+    box: dict[str, BaseException | None] = {}
+
+    def init() -> None:
+        try:
+            if local:
+                ray.init(num_cpus=os.cpu_count() or 1, include_dashboard=False, **kw)
+            else:
+                ray.init(address=address, **kw)
+            box["error"] = None
+        except BaseException as exc:  # noqa: BLE001 - handed to the calling thread
+            box["error"] = exc
+
+    # ray.init has no timeout of its own: a head that never answers would hold us forever.
+    t = threading.Thread(target=init, daemon=True, name="ray-init")
+    t.start()
+    t.join(timeout)
+    where = address if not local else "a local instance"
+    if t.is_alive():
         raise IntuitfError(
-            f"Could not start or join Ray at {address or 'a local instance'}: {exc}",
-            "Check the address (ray status on the head node shows it), or drop ADDRESS to "
-            "start a local instance.",
+            f"Ray at {where} did not answer within {timeout:g} s.",
+            "Check the address (`ray status` on the head node shows it) and that this machine "
+            "can reach it, or give a longer --ray-timeout.",
+        )
+    exc = box.get("error")
+    if exc is None:
+        return
+    text = f"{type(exc).__name__}: {exc}"
+    if _is_auth_refusal(text):
+        raise IntuitfError(
+            f"The Ray cluster at {where} refused this process's authentication token.",
+            "The cluster uses token authentication: give this process the head's token, e.g. "
+            "RAY_AUTH_TOKEN=$(ray get-auth-token) on the head node (or copy its "
+            "~/.ray/auth_token here), and RAY_AUTH_MODE=token.",
         ) from None
+    raise IntuitfError(
+        f"Could not start or join Ray at {where}: {_first_line(text)}",
+        "Check the address (`ray status` on the head node shows it), or drop ADDRESS to "
+        "start a local instance.",
+    ) from None
+
+
+def _first_line(text: str, limit: int = 300) -> str:
+    line = text.strip().splitlines()[0] if text.strip() else text
+    return line[:limit]
+
+
+def _is_auth_refusal(text: str) -> bool:
+    low = text.lower()
+    return any(k in low for k in ("invalidauthtoken", "unauthenticated", "authentication"))
+
+
+def _split_address(address: str) -> tuple[str, int] | None:
+    """(host, port) of HOST:PORT or ray://HOST:PORT, else None."""
+    rest = address.split("://", 1)[1] if "://" in address else address
+    host, sep, port = rest.rpartition(":")
+    if not sep or not port.isdigit():
+        return None
+    return host.strip("[]"), int(port)
+
+
+def _check_reachable(address: str, timeout: float) -> None:
+    """Fail at once, saying why, when nothing listens at ``address`` (a TCP connect)."""
+    import socket
+
+    if address.startswith(("ray://", "rays://")):
+        try:
+            import grpc  # noqa: F401
+            import ray.util.client  # noqa: F401
+        except ImportError:
+            raise IntuitfError(
+                f"--ray {address} needs Ray's client, which is not installed.",
+                'pip install "intuitf[ray]" (it brings ray[client]).',
+            ) from None
+    hp = _split_address(address)
+    if hp is None:
+        raise IntuitfError(
+            f"{address!r} is not a Ray address.",
+            "Give HOST:PORT (the GCS port `ray start --head` printed), ray://HOST:PORT, "
+            "auto, or no ADDRESS for a local instance.",
+        )
+    host, port = hp
+    if not 0 < port < 65536:
+        raise IntuitfError(f"{address!r}: the port must be within 1..65535.")
+    try:
+        with socket.create_connection((host, port), timeout=min(timeout, 10.0)):
+            pass
+    except OSError as exc:
+        why = "no such host" if isinstance(exc, socket.gaierror) else (exc.strerror or str(exc))
+        raise IntuitfError(
+            f"Cannot reach a Ray cluster at {address}: {why}.",
+            "Check the address (`ray status` on the head node shows it), that the head is "
+            "running and that this machine can reach it.",
+        ) from None
+
+
+def _use_token_if_any() -> None:
+    """Send the token, when there is one, to a cluster joined by its address.
+
+    Ray turns token authentication on for a local cluster found automatically (``auto``) but
+    never for an explicit address, so a driver joining a head started with ``ray start
+    --head`` (token authentication on by default) would be refused although the token is
+    right there: use it the way ``auto`` does.
+    """
+    if os.environ.get("RAY_AUTH_MODE") is not None:
+        return  # the user chose
+    try:
+        from ray._private.authentication.authentication_token_setup import (
+            maybe_enable_token_auth_if_token_available,
+        )
+
+        maybe_enable_token_auth_if_token_available(warn_if_disabled=False)
+    except Exception:  # noqa: BLE001 - an older Ray without token authentication
+        pass

@@ -11,7 +11,9 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from typer.core import TyperCommand
 
+from intuitf.batch.runner import DEFAULT_MAX_FAILURES, DEFAULT_RAY_TIMEOUT
 from intuitf.cli import options as vo
 from intuitf.errors import IntuitfError
 
@@ -59,6 +61,41 @@ def _split_ray(volumes: list[str]) -> tuple[list[str], str | None]:
     return out, ray
 
 
+class _BatchCommand(TyperCommand):
+    """Takes ``--ray [ADDRESS]`` out of the arguments before Click parses them.
+
+    Click has no option whose value may be left out, so ``--ray`` alone and ``--ray ADDRESS``
+    are read here; the documented ``--ray`` option of the command then only shows in --help.
+    """
+
+    def parse_args(self, ctx, args: list[str]) -> list[str]:
+        if "--help" not in args:
+            args, ray = _split_ray_option(list(args))
+            ctx.meta["intuitf.ray"] = ray
+        return super().parse_args(ctx, args)
+
+
+def _split_ray_option(args: list[str]) -> tuple[list[str], str | None]:
+    """``--ray`` and its optional ADDRESS out of ``args`` (the other tokens untouched)."""
+    out: list[str] = []
+    ray: str | None = None
+    i = 0
+    while i < len(args):
+        tok = args[i]
+        if tok == "--ray":
+            ray = "local"
+            nxt = args[i + 1] if i + 1 < len(args) else None
+            if nxt is not None and _RAY_ADDRESS.match(nxt) and not Path(nxt).exists():
+                ray = nxt
+                i += 1
+        elif tok.startswith("--ray="):
+            ray = tok.split("=", 1)[1] or "local"
+        else:
+            out.append(tok)
+        i += 1
+    return out, ray
+
+
 def _camera(azimuth: float | None, elevation: float | None) -> dict:
     """The judging view of every volume (the session's default when neither is given)."""
     if azimuth is None and elevation is None:
@@ -74,6 +111,13 @@ def _progress_callback(progress: Progress, task) -> callable:
     def update(event: str, item, result) -> None:
         if event == "started":
             progress.console.print(f"[dim]started[/] {escape(item.key)}")
+            return
+        if event == "retry":
+            why = escape(str((result or {}).get("message", ""))[:160])
+            progress.console.print(
+                f"[yellow]again[/] {escape(item.key)} (try {int(result['retries']) + 1}) — "
+                f"{escape(str(result.get('status')))}: {why}"
+            )
             return
         counts["done"] += 1
         if result is not None:
@@ -102,8 +146,10 @@ def register(app: typer.Typer) -> None:
     @app.command(
         help=HELP,
         context_settings={"ignore_unknown_options": True},
+        cls=_BatchCommand,
     )
     def batch(
+        ctx: typer.Context,
         reference: str = typer.Argument(
             None,
             metavar="REFERENCE",
@@ -172,6 +218,28 @@ def register(app: typer.Typer) -> None:
             metavar="RPM",
             help="At most this many judge requests per minute, whole batch.",
         ),
+        ray_doc: str = typer.Option(
+            None,
+            "--ray",
+            metavar="[ADDRESS]",
+            help="Run on Ray: alone, a local Ray instance that goes away with the batch; with "
+            "ADDRESS (HOST:PORT as `ray start --head` prints it, ray://HOST:PORT, auto), "
+            "join that cluster.",
+            show_default=False,
+        ),
+        max_failures: int = typer.Option(
+            DEFAULT_MAX_FAILURES,
+            "--max-failures",
+            min=0,
+            help="Try a volume this many more times when its run fails (its judge down, an "
+            "error, its worker lost); each try resumes it.",
+        ),
+        ray_timeout: float = typer.Option(
+            DEFAULT_RAY_TIMEOUT,
+            "--ray-timeout",
+            min=0.1,
+            help="Seconds to wait for the Ray cluster to answer before giving up.",
+        ),
         flag_below: float = typer.Option(
             0.5,
             "--flag-below",
@@ -189,6 +257,12 @@ def register(app: typer.Typer) -> None:
         ),
         top: int = typer.Option(4, "--top", help="How many best TFs to keep per volume."),
         shading: bool = typer.Option(True, "--shading/--no-shading"),
+        device: str = typer.Option(
+            "auto",
+            "--device",
+            metavar="auto|cpu|cuda",
+            help="Where to render: cuda (an NVIDIA GPU), cpu, or auto (the GPU when usable).",
+        ),
         palette: bool = typer.Option(True, "--palette/--no-palette"),
         hints: bool = typer.Option(True, "--hints/--no-hints"),
         init: bool = typer.Option(
@@ -213,6 +287,7 @@ def register(app: typer.Typer) -> None:
         started = time.perf_counter()
         args = ([reference] if reference else []) + list(volumes or [])
         args, ray = _split_ray(args)
+        ray = ray or ctx.meta.get("intuitf.ray") or ray_doc
         if ray is not None:
             from intuitf.batch.runner import import_ray
 
@@ -226,6 +301,7 @@ def register(app: typer.Typer) -> None:
             budget_calls=budget_calls, budget_usd=budget_usd, workers=workers,
             per_worker=per_worker, ray=ray, max_concurrency=max_concurrency,
             rate_per_min=rate_limit, flag_below=flag_below, judge_options=judge_options,
+            max_failures=max_failures, ray_timeout=ray_timeout,
         )  # fmt: skip
         if resume is not None:
             if args:
@@ -245,7 +321,7 @@ def register(app: typer.Typer) -> None:
                 seed=seed, explorer=str(explorer), protocol=str(protocol), image_size=size,
                 output_size=output_size, top_k=top, shading=shading,
                 camera=_camera(azimuth, elevation), palette_hint=palette,
-                material_hints=hints,
+                material_hints=hints, device=device,
             )  # fmt: skip
             if carry and not init:
                 settings["stages"] = [["customize", generations]]
@@ -271,7 +347,14 @@ def register(app: typer.Typer) -> None:
                     f"[yellow]note:[/] {job.lost} model request(s) were under way when the batch "
                     "last stopped; they count as spent."
                 )
-            where = f"Ray ({ray})" if ray else f"{workers or os.cpu_count()} worker process(es)"
+            ray_used = job.req.ray
+            where = (
+                f"Ray ({ray_used})"
+                if ray_used
+                else f"{workers or os.cpu_count()} worker process(es)"
+            )
+            if job.req.backend_from_record is not None:
+                where += " as the batch was started"
             console.print(
                 f"Batch of [bold]{len(job.items)}[/] volume(s) after {escape(job.reference.describe())}, "
                 f"judge {escape(job.config.template['judge']['spec'])}, on {where}; folder {job.root}"

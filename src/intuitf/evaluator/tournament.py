@@ -40,7 +40,18 @@ Two protocols share this code:
       (a cached judge would repeat its verdict, which is no new evidence).
 
 Verdicts with ``p_first`` 0.5 (ties, or technical errors the judge reported as ties) score half a
-point each and are recorded, so the same pair never meets twice in one tournament. Results are
+point each and are recorded, so the same pair never meets twice in one tournament.
+
+**One failed match never ends a tournament.** A match whose judge raises
+:class:`~intuitf.errors.JudgeError` (the server gave no answer after its retries) is recorded as
+an *undecided* match, a tie whose ``Verdict.error`` says why, exactly like an answer the judge
+could not read, and the tournament goes on. Only when the judge is down, when more than half of
+the requests of two rounds in a row got no answer (a server that is unreachable, rejects the
+key, or stopped answering for longer than the answer deadline fails them all; one bad round of
+a small field can be bad luck), does the tournament stop with a :class:`JudgeError` that says
+so; the failed matches of that last round are then not recorded. Undecided matches are not
+cached, so a resumed run asks them again. A re-ask that fails leaves its match's first verdict
+as it was. Results are
 reproducible: with the same seed and the same verdicts the pairings and ratings are the same,
 whatever order the concurrent matches finish in, because updates are applied in schedule order.
 """
@@ -54,15 +65,20 @@ from typing import Literal
 
 import numpy as np
 
-from intuitf.errors import IntuitfError
+from intuitf.errors import IntuitfError, JudgeError
 from intuitf.evaluator.matches import MatchRecord, MatchStats, TournamentResult
 from intuitf.evaluator.ratings import bradley_terry, default_rounds, elo_expected
-from intuitf.evaluator.types import Aspect, Cost, Intent, Judge, Verdict, combine_answers
+from intuitf.evaluator.types import Aspect, Choice, Cost, Intent, Judge, Verdict, combine_answers
 
 Protocol = Literal["efficient", "paper"]
 ProgressFn = Callable[[int, int, int, Cost], None]
 #: Called with each judged match, in schedule order, as soon as its round is scored.
 MatchFn = Callable[["MatchRecord"], None]
+
+#: The judge counts as down when more than this share of the requests of
+#: ``JUDGE_DOWN_ROUNDS`` rounds in a row got no answer.
+JUDGE_DOWN_SHARE = 0.5
+JUDGE_DOWN_ROUNDS = 2
 
 #: Beyond this many search steps the pairing gives up avoiding rematches (never reached in
 #: practice: with log2(n) + 2 rounds each player has met only a handful of the others).
@@ -136,9 +152,11 @@ class SwissTournament:
         among ``ids`` are past players. The efficient protocol fits them with this
         tournament's verdicts (see the module notes); the paper protocol ignores them.
 
-        If the judge raises :class:`BudgetExhausted` or :class:`JudgeError`, the other matches of
-        that round are awaited (they are paid for), and the exception is re-raised with an
-        attribute ``partial``: the :class:`TournamentResult` of everything judged so far.
+        A match the judge fails with :class:`JudgeError` is recorded undecided and play goes on
+        (see the module notes). If the judge raises :class:`BudgetExhausted`, or is down (more
+        than half of the requests of two rounds in a row failed), the other matches of that round are awaited
+        (they are paid for), and a :class:`BudgetExhausted` or :class:`JudgeError` is raised with
+        an attribute ``partial``: the :class:`TournamentResult` of everything judged so far.
         """
         ids = [str(i) for i in ids]
         if len(images) != len(ids):
@@ -220,6 +238,8 @@ class _State:
         #: Matches to re-ask in the other order: (index in matches, first, second).
         self.pending: list[tuple[int, int, int]] = []
         self.on_match: MatchFn | None = None
+        #: Rounds in a row in which most requests got no answer.
+        self.failing_rounds = 0
         self.t0 = time.perf_counter()
 
     async def play(self) -> TournamentResult:
@@ -333,10 +353,23 @@ class _State:
         jobs = [one(a, b) for a, b in pairs] + [one(b, a) for _, a, b in checks]
         outcomes = await asyncio.gather(*jobs, return_exceptions=True)
         failure: BaseException | None = None
+        unanswered = [o for o in outcomes if isinstance(o, JudgeError)]
+        if outcomes and len(unanswered) > JUDGE_DOWN_SHARE * len(outcomes):
+            self.failing_rounds += 1
+        else:
+            self.failing_rounds = 0
+        # One bad round can be bad luck (a small field has few matches a round); two in a row
+        # are a judge that is down.
+        down = self.failing_rounds >= JUDGE_DOWN_ROUNDS
+        if down:
+            failure = _judge_down(rnd, len(unanswered), len(outcomes), unanswered[-1])
         # Apply in schedule order, from the ratings at the start of the round: every player
         # plays at most once per round, so this equals sequential Elo and ignores timing.
         deltas = np.zeros(self.n)
         for (a, b), out in zip(pairs, outcomes[: len(pairs)], strict=True):
+            if isinstance(out, JudgeError) and not down:
+                # One match without an answer is an undecided match, not the end of the run.
+                out = _undecided(out, cfg.aspects)
             if isinstance(out, BaseException):
                 failure = failure or out
                 continue
@@ -360,6 +393,8 @@ class _State:
                     self.pending.append((len(self.matches) - 1, a, b))
         self.elo += deltas
         for (idx, _a, _b), out in zip(checks, outcomes[len(pairs) :], strict=True):
+            if isinstance(out, JudgeError) and not down:
+                continue  # the match keeps its first verdict
             if isinstance(out, BaseException):
                 failure = failure or out
                 continue
@@ -402,6 +437,28 @@ class _State:
             protocol=self.cfg.protocol,
             complete=complete,
         )
+
+
+def _undecided(exc: JudgeError, aspects: Sequence[Aspect]) -> Verdict:
+    """The verdict of a match the judge could not answer: a tie that says why (undecided)."""
+    reason = getattr(exc, "message", None) or str(exc) or type(exc).__name__
+    return Verdict(
+        per_aspect={a.key: Choice.TIE for a in aspects},
+        overall=Choice.TIE,
+        p_first=0.5,
+        error=f"no answer: {reason}",
+    )
+
+
+def _judge_down(rnd: int, failed: int, asked: int, last: JudgeError) -> JudgeError:
+    """The error that stops a tournament whose judge answers (almost) nothing."""
+    reason = getattr(last, "message", None) or str(last)
+    return JudgeError(
+        f"The judge is down: {failed} of {asked} requests of round {rnd} got no answer, as "
+        f"did most of the round before (last: {reason}).",
+        getattr(last, "hint", None)
+        or "Check the model server; continue with `intuitf optimize --resume RUN`.",
+    )
 
 
 def _merge(a: Verdict, b: Verdict, aspects: Sequence[Aspect]) -> Verdict:
