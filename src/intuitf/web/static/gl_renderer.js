@@ -1,0 +1,336 @@
+// The page's WebGL2 volume renderer: the server's ray caster (render/kernels.py) in a fragment
+// shader, for the volume view, the pick and the features strip.
+//
+// One instance owns one WebGL2 context (on its own canvas) and one volume texture. render()
+// draws a picture into that canvas (the caller copies it where it is shown); attribution()
+// renders each Gaussian's part of every pixel's opacity into float targets and reads them back
+// for the pick. Defaults match VolumeRenderer's: sample distance 0.5 voxel, ambient 0.3,
+// diffuse 0.7, specular 0.25, shininess 24, early stop at T < 1/255.
+
+import { extentOf, frame } from "./gl_camera.js";
+import { ATTRIBUTE, RENDER, VERTEX } from "./gl_shaders.js";
+import { occupancy, tfKey, tfLut } from "./gl_tf.js";
+import { visibleBlocks } from "./gl_volume.js";
+
+export const DEFAULTS = Object.freeze({
+  sampleDistance: 0.5,
+  shade: [0.3, 0.7, 0.25, 24],
+  earlyStop: 1 / 255,
+});
+
+/** Why the page cannot render itself here (null when it can): for the note beside the view. */
+export function webgl2Problem() {
+  try {
+    const c = document.createElement("canvas");
+    const gl = c.getContext("webgl2");
+    if (!gl) return "this browser offers no WebGL2";
+    const lose = gl.getExtension("WEBGL_lose_context");
+    if (lose) lose.loseContext();
+    return null;
+  } catch (err) {
+    return `WebGL2 failed (${err && err.message ? err.message : err})`;
+  }
+}
+
+function compile(gl, type, src) {
+  const s = gl.createShader(type);
+  gl.shaderSource(s, src);
+  gl.compileShader(s);
+  if (!gl.getShaderParameter(s, gl.COMPILE_STATUS)) {
+    const log = gl.getShaderInfoLog(s);
+    gl.deleteShader(s);
+    throw new Error(`shader: ${log}`);
+  }
+  return s;
+}
+
+function program(gl, vs, fs) {
+  const p = gl.createProgram();
+  gl.attachShader(p, compile(gl, gl.VERTEX_SHADER, vs));
+  gl.attachShader(p, compile(gl, gl.FRAGMENT_SHADER, fs));
+  gl.linkProgram(p);
+  if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error(`program: ${gl.getProgramInfoLog(p)}`);
+  const uniforms = {};
+  const n = gl.getProgramParameter(p, gl.ACTIVE_UNIFORMS);
+  for (let i = 0; i < n; i++) {
+    const info = gl.getActiveUniform(p, i);
+    const name = info.name.replace(/\[0\]$/, "");
+    uniforms[name] = gl.getUniformLocation(p, info.name);
+  }
+  return { p, u: uniforms };
+}
+
+export class GLVolumeRenderer {
+  /** A renderer on `canvas` (a fresh one when omitted). Throws when WebGL2 is missing. */
+  constructor(canvas = document.createElement("canvas")) {
+    this.canvas = canvas;
+    const gl = canvas.getContext("webgl2", {
+      alpha: false,
+      antialias: false,
+      depth: false,
+      stencil: false,
+      premultipliedAlpha: false,
+      preserveDrawingBuffer: true,
+      powerPreference: "high-performance",
+    });
+    if (!gl) throw new Error("this browser offers no WebGL2");
+    this.gl = gl;
+    const dbg = gl.getExtension("WEBGL_debug_renderer_info");
+    this.gpu = String(gl.getParameter(dbg ? dbg.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
+    /** True on a software rasteriser (SwiftShader, llvmpipe): frames may be slow. */
+    this.software = /swiftshader|llvmpipe|software|softpipe/i.test(this.gpu);
+    this.max3d = gl.getParameter(gl.MAX_3D_TEXTURE_SIZE);
+    this.floatTargets = !!gl.getExtension("EXT_color_buffer_float");
+    this.render = this.render.bind(this);
+    this.progRender = program(gl, VERTEX, RENDER);
+    this.progAttr = null; // compiled on the first pick
+    this.vao = gl.createVertexArray();
+    this.volume = null;
+    this.lutTex = gl.createTexture();
+    this.visTex = gl.createTexture();
+    this.volTex = null;
+    this.lutState = { key: "", n: 0, occ: null };
+    this.vis = null;
+  }
+
+  /** The page's limits for a volume texture: {maxBytes, maxSide}. */
+  limits() {
+    const mem = navigator.deviceMemory || 4; // GiB, coarse; absent outside Chromium
+    // A quarter of the device's memory at most, 1 GiB on a GPU, 512 MiB in software.
+    const cap = this.software ? 512 : 1024;
+    return { maxBytes: Math.min(cap, mem * 256) * 1024 * 1024, maxSide: this.max3d };
+  }
+
+  /**
+   * Upload a volume (from gl_volume.fetchVolume) and its block ranges, a few slices per
+   * task so the page stays responsive. Resolves when the texture is complete.
+   */
+  async setVolume(vol, blocks) {
+    const gl = this.gl;
+    if (this.volTex) gl.deleteTexture(this.volTex);
+    const tex = gl.createTexture();
+    gl.bindTexture(gl.TEXTURE_3D, tex);
+    const [nx, ny, nz] = vol.dims;
+    const r8 = vol.format === "r8";
+    gl.texStorage3D(gl.TEXTURE_3D, 1, r8 ? gl.R8 : gl.R16F, nx, ny, nz);
+    gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
+    const slab = Math.max(1, Math.floor((8 * 1024 * 1024) / (nx * ny * (r8 ? 1 : 2))));
+    for (let z = 0; z < nz; z += slab) {
+      const d = Math.min(slab, nz - z);
+      const part = vol.data.subarray(z * nx * ny, (z + d) * nx * ny);
+      gl.bindTexture(gl.TEXTURE_3D, tex);
+      gl.texSubImage3D(gl.TEXTURE_3D, 0, 0, 0, z, nx, ny, d, gl.RED, r8 ? gl.UNSIGNED_BYTE : gl.HALF_FLOAT, part);
+      if (z + d < nz) await new Promise((r) => setTimeout(r, 0));
+    }
+    for (const [k, v] of [
+      [gl.TEXTURE_MIN_FILTER, gl.LINEAR],
+      [gl.TEXTURE_MAG_FILTER, gl.LINEAR],
+      [gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE],
+      [gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE],
+      [gl.TEXTURE_WRAP_R, gl.CLAMP_TO_EDGE],
+    ])
+      gl.texParameteri(gl.TEXTURE_3D, k, v);
+    this.volTex = tex;
+    // The block grid: one byte per block, rewritten for each TF.
+    gl.bindTexture(gl.TEXTURE_3D, this.visTex);
+    gl.texStorage3D(gl.TEXTURE_3D, 1, gl.R8, blocks.nb[0], blocks.nb[1], blocks.nb[2]);
+    for (const k of [gl.TEXTURE_MIN_FILTER, gl.TEXTURE_MAG_FILTER]) gl.texParameteri(gl.TEXTURE_3D, k, gl.NEAREST);
+    this.volume = vol;
+    this.blocks = blocks;
+    this.extent = extentOf(vol.dims, vol.spacing);
+    const m = Math.min(...vol.spacing);
+    this.invSpacing = vol.spacing.map((s) => m / s);
+    this.lutState = { key: "", n: 0, occ: null };
+  }
+
+  /** Make the LUT and block-visibility textures current for `tf` (cheap when unchanged). */
+  _useTF(tf, sampleDistance) {
+    const gl = this.gl;
+    const n = this.volume.lutSize;
+    const key = `${tfKey(tf)}|${n}|${sampleDistance}`;
+    if (key === this.lutState.key) return this.lutState;
+    const lut = tfLut(tf, n, sampleDistance);
+    const rows = Math.ceil(n / 256);
+    const padded = new Float32Array(256 * rows * 4);
+    padded.set(lut);
+    gl.bindTexture(gl.TEXTURE_2D, this.lutTex);
+    gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, 256, rows, 0, gl.RGBA, gl.FLOAT, padded);
+    for (const k of [gl.TEXTURE_MIN_FILTER, gl.TEXTURE_MAG_FILTER]) gl.texParameteri(gl.TEXTURE_2D, k, gl.NEAREST);
+    const occ = occupancy(lut);
+    this.vis = visibleBlocks(this.blocks, occ, this.vis);
+    const nb = this.blocks.nb;
+    gl.bindTexture(gl.TEXTURE_3D, this.visTex);
+    gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
+    gl.texSubImage3D(gl.TEXTURE_3D, 0, 0, 0, 0, nb[0], nb[1], nb[2], gl.RED, gl.UNSIGNED_BYTE, this.vis);
+    this.lutState = { key, n, occ, lut };
+    return this.lutState;
+  }
+
+  _common(prog, opts) {
+    const gl = this.gl;
+    const u = prog.u;
+    const vol = this.volume;
+    const f = frame(opts.camera || {}, this.extent, opts.width, opts.height);
+    gl.useProgram(prog.p);
+    gl.activeTexture(gl.TEXTURE0);
+    gl.bindTexture(gl.TEXTURE_3D, this.volTex);
+    gl.uniform1i(u.u_vol, 0);
+    gl.activeTexture(gl.TEXTURE1);
+    gl.bindTexture(gl.TEXTURE_3D, this.visTex);
+    gl.uniform1i(u.u_vis, 1);
+    gl.activeTexture(gl.TEXTURE2);
+    gl.bindTexture(gl.TEXTURE_2D, this.lutTex);
+    gl.uniform1i(u.u_lut, 2);
+    gl.uniform3f(u.u_dims, vol.dims[0], vol.dims[1], vol.dims[2]);
+    gl.uniform3i(u.u_nb, this.blocks.nb[0], this.blocks.nb[1], this.blocks.nb[2]);
+    gl.uniform3f(u.u_is, this.invSpacing[0], this.invSpacing[1], this.invSpacing[2]);
+    gl.uniform2f(u.u_map, vol.map[0], vol.map[1]);
+    gl.uniform1i(u.u_nl, vol.lutSize);
+    gl.uniform1f(u.u_dt, opts.sampleDistance);
+    gl.uniform1f(u.u_tstop, DEFAULTS.earlyStop);
+    gl.uniform3fv(u.u_eye, f.eye);
+    gl.uniform3fv(u.u_fwd, f.fwd);
+    gl.uniform3fv(u.u_right, f.right);
+    gl.uniform3fv(u.u_up, f.up);
+    gl.uniform4f(u.u_view, f.halfWidth, f.halfHeight, f.pan[0] || 0, f.pan[1] || 0);
+    gl.uniform2f(u.u_size, opts.width, opts.height);
+    gl.uniform1i(u.u_persp, f.perspective ? 1 : 0);
+    gl.bindVertexArray(this.vao);
+  }
+
+  /**
+   * Draw `tf` from `camera` at width × height into this renderer's canvas. Options: shading
+   * (default true), background [r, g, b] in 0..1, sampleDistance. Returns the milliseconds
+   * the GPU took (the call waits for the picture).
+   */
+  render({ tf, camera, width, height, shading = true, background = [0, 0, 0], sampleDistance = DEFAULTS.sampleDistance, sync = true }) {
+    const gl = this.gl;
+    const t0 = performance.now();
+    if (this.canvas.width !== width) this.canvas.width = width;
+    if (this.canvas.height !== height) this.canvas.height = height;
+    this._useTF(tf, sampleDistance);
+    const prog = this.progRender;
+    this._common(prog, { camera, width, height, sampleDistance });
+    const u = prog.u;
+    gl.uniform4fv(u.u_shade, DEFAULTS.shade);
+    gl.uniform1i(u.u_shading, shading ? 1 : 0);
+    gl.uniform3f(u.u_bg, background[0], background[1], background[2]);
+    gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+    gl.viewport(0, 0, width, height);
+    gl.drawArrays(gl.TRIANGLES, 0, 3);
+    if (sync) {
+      const px = new Uint8Array(4);
+      gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px); // waits for the frame
+    }
+    return performance.now() - t0;
+  }
+
+  /** The canvas's picture as RGB bytes, rows top to bottom (for tests and exports). */
+  readRGB() {
+    const gl = this.gl;
+    const w = this.canvas.width;
+    const h = this.canvas.height;
+    const px = new Uint8Array(w * h * 4);
+    gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+    gl.readPixels(0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, px);
+    const out = new Uint8Array(w * h * 3);
+    for (let y = 0; y < h; y++) {
+      const src = (h - 1 - y) * w * 4;
+      for (let x = 0; x < w; x++) {
+        out[(y * w + x) * 3] = px[src + x * 4];
+        out[(y * w + x) * 3 + 1] = px[src + x * 4 + 1];
+        out[(y * w + x) * 3 + 2] = px[src + x * 4 + 2];
+      }
+    }
+    return out;
+  }
+
+  /**
+   * Each Gaussian's part of every pixel's opacity: Float32Array (N × height × width), rows
+   * top to bottom, as the server's SampleCache.attribution. Null without float targets.
+   */
+  attribution({ tf, camera, width, height, sampleDistance = DEFAULTS.sampleDistance }) {
+    const gl = this.gl;
+    if (!this.floatTargets) return null;
+    if (!this.progAttr) this.progAttr = program(gl, VERTEX, ATTRIBUTE);
+    const ng = Math.min(16, tf.gaussians.length);
+    this._useTF(tf, sampleDistance);
+    const prog = this.progAttr;
+    const g = new Float32Array(64);
+    tf.gaussians.slice(0, 16).forEach((x, i) => g.set([x.mean, x.width, x.height, 0], i * 4));
+    const targets = Math.ceil(ng / 4);
+    const fb = gl.createFramebuffer();
+    gl.bindFramebuffer(gl.FRAMEBUFFER, fb);
+    gl.activeTexture(gl.TEXTURE3);
+    const texs = [];
+    for (let i = 0; i < 4; i++) {
+      const t = gl.createTexture();
+      gl.bindTexture(gl.TEXTURE_2D, t);
+      gl.texStorage2D(gl.TEXTURE_2D, 1, gl.RGBA32F, width, height);
+      gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0 + i, gl.TEXTURE_2D, t, 0);
+      texs.push(t);
+    }
+    gl.drawBuffers([0, 1, 2, 3].map((i) => gl.COLOR_ATTACHMENT0 + i));
+    // After the targets are made: _common binds the LUT to texture unit 2, which making a
+    // target (bindTexture on the active unit) would replace.
+    this._common(prog, { camera, width, height, sampleDistance });
+    gl.uniform4fv(prog.u.u_gauss, g);
+    gl.uniform1i(prog.u.u_ng, ng);
+    gl.viewport(0, 0, width, height);
+    gl.drawArrays(gl.TRIANGLES, 0, 3);
+    const out = new Float32Array(ng * width * height);
+    const px = new Float32Array(width * height * 4);
+    for (let t = 0; t < targets; t++) {
+      gl.readBuffer(gl.COLOR_ATTACHMENT0 + t);
+      gl.readPixels(0, 0, width, height, gl.RGBA, gl.FLOAT, px);
+      for (let c = 0; c < 4 && t * 4 + c < ng; c++) {
+        const plane = out.subarray((t * 4 + c) * width * height, (t * 4 + c + 1) * width * height);
+        for (let y = 0; y < height; y++) {
+          const src = (height - 1 - y) * width * 4;
+          for (let x = 0; x < width; x++) plane[y * width + x] = px[src + x * 4 + c];
+        }
+      }
+    }
+    gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+    gl.deleteFramebuffer(fb);
+    texs.forEach((t) => gl.deleteTexture(t));
+    return out;
+  }
+}
+
+/** A feature counts as visible at a pixel with at least this share (session/views.py). */
+export const VISIBLE_SHARE = 0.02;
+
+/**
+ * The paper's rule over an attribution (N × H × W): of the features visible at (x, y), the one
+ * with the smallest projected area. {index, visible: [[i, share, area]], mask} as the server's
+ * pick_smallest; mask is a Uint8Array (H × W) of the chosen feature's pixels.
+ */
+export function pickSmallest(attr, n, width, height, x, y) {
+  const size = width * height;
+  const visible = [];
+  for (let i = 0; i < n; i++) {
+    const plane = attr.subarray(i * size, (i + 1) * size);
+    const here = plane[y * width + x];
+    if (here < VISIBLE_SHARE) continue;
+    let area = 0;
+    for (let p = 0; p < size; p++) if (plane[p] >= VISIBLE_SHARE) area++;
+    visible.push([i, here, area]);
+  }
+  visible.sort((a, b) => a[2] - b[2] || b[1] - a[1] || a[0] - b[0]);
+  if (!visible.length) return { index: null, visible: [], mask: null };
+  const chosen = visible[0][0];
+  return { index: chosen, visible, mask: featureMask(attr, [chosen], width, height) };
+}
+
+/** Pixels where any of `indices` is visible: Uint8Array (H × W) of 0/1. */
+export function featureMask(attr, indices, width, height) {
+  const size = width * height;
+  const mask = new Uint8Array(size);
+  for (const i of indices) {
+    const plane = attr.subarray(i * size, (i + 1) * size);
+    if (plane.length < size) continue;
+    for (let p = 0; p < size; p++) if (plane[p] >= VISIBLE_SHARE) mask[p] = 1;
+  }
+  return mask;
+}

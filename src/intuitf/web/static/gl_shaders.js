@@ -1,0 +1,226 @@
+// GLSL ES 3.0 sources of the page's ray marcher: the server's kernels (render/kernels.py
+// `march` and `attribute`) written for the fragment shader, one ray per pixel.
+//
+// Same rays (ViewFrame packed), same box (voxel centres [0, n-1]), samples at t0 + k·dt from
+// box entry, trilinear value (the texture's linear filter), post-classification with linear
+// interpolation between LUT entries, front-to-back premultiplied compositing, early ray
+// termination at T < 1/255, empty-space skipping over 8³ blocks that keeps the sample grid,
+// and Blinn–Phong with a two-sided headlight from the central difference of the trilinear
+// field at ±1 voxel (what the server's interpolated precomputed gradient equals inside the box).
+
+export const VERTEX = `#version 300 es
+void main() {
+  // One triangle that covers the viewport.
+  vec2 p = vec2(float((gl_VertexID << 1) & 2), float(gl_VertexID & 2));
+  gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
+}`;
+
+const COMMON = `
+precision highp float;
+precision highp int;
+precision highp sampler3D;
+precision highp sampler2D;
+
+uniform sampler3D u_vol;   // R8 (original bytes) or R16F (normalised values), linear filter
+uniform sampler3D u_vis;   // R8 per block: visible (1) or skipped (0), nearest
+uniform sampler2D u_lut;   // RGBA32F, entry q at (q % 256, q / 256), straight colour
+uniform vec3 u_dims;       // nx, ny, nz
+uniform ivec3 u_nb;        // blocks per axis
+uniform vec3 u_is;         // 1 / spacing (spacing in units of the smallest)
+uniform vec2 u_map;        // normalised = texel * u_map.x + u_map.y
+uniform int u_nl;          // LUT entries
+uniform float u_dt;        // sample distance (world units)
+uniform float u_tstop;     // early ray termination
+uniform vec3 u_eye;
+uniform vec3 u_fwd;
+uniform vec3 u_right;
+uniform vec3 u_up;
+uniform vec4 u_view;       // half width, half height, pan x, pan y
+uniform vec2 u_size;       // picture width, height
+uniform int u_persp;
+
+const int BSIZE = 8;
+
+float value(vec3 p) {
+  vec3 c = clamp(p, vec3(0.0), u_dims - 1.0);
+  return texture(u_vol, (c + 0.5) / u_dims).r * u_map.x + u_map.y;
+}
+
+vec4 lutAt(int q) {
+  return texelFetch(u_lut, ivec2(q & 255, q >> 8), 0);
+}
+
+vec2 slab(float o, float d, float hi, vec2 t) {
+  if (abs(d) < 1e-12) {
+    if (o < 0.0 || o > hi) return vec2(1.0, 0.0);
+    return t;
+  }
+  float ta = (0.0 - o) / d;
+  float tb = (hi - o) / d;
+  if (ta > tb) { float s = ta; ta = tb; tb = s; }
+  return vec2(max(t.x, ta), min(t.y, tb));
+}
+
+// The ray of this pixel: origin and unit direction (world), as kernels._ray.
+void pixelRay(out vec3 o, out vec3 d) {
+  float x = (gl_FragCoord.x / u_size.x * 2.0 - 1.0 - 2.0 * u_view.z) * u_view.x;
+  float y = (gl_FragCoord.y / u_size.y * 2.0 - 1.0 - 2.0 * u_view.w) * u_view.y;
+  if (u_persp == 1) {
+    o = u_eye;
+    d = normalize(u_fwd + x * u_right + y * u_up);
+  } else {
+    o = u_eye + x * u_right + y * u_up;
+    d = u_fwd;
+  }
+}
+
+// The first sample index at or after the exit of the block that holds p (kernels.march).
+int skipBlock(ivec3 b, vec3 oi, vec3 di, float t0, int k) {
+  float tex = 1e30;
+  float bs = float(BSIZE);
+  if (di.x > 1e-12) tex = min(tex, (float(b.x + 1) * bs - oi.x) / di.x);
+  else if (di.x < -1e-12) tex = min(tex, (float(b.x) * bs - oi.x) / di.x);
+  if (di.y > 1e-12) tex = min(tex, (float(b.y + 1) * bs - oi.y) / di.y);
+  else if (di.y < -1e-12) tex = min(tex, (float(b.y) * bs - oi.y) / di.y);
+  if (di.z > 1e-12) tex = min(tex, (float(b.z + 1) * bs - oi.z) / di.z);
+  else if (di.z < -1e-12) tex = min(tex, (float(b.z) * bs - oi.z) / di.z);
+  int kn = int(ceil((tex - t0) / u_dt - 1e-4));
+  return kn > k ? kn : k + 1;
+}
+
+ivec3 blockOf(vec3 p) {
+  ivec3 i = ivec3(max(p, vec3(0.0)));
+  return min(i / BSIZE, u_nb - 1);
+}
+`;
+
+export const RENDER = `#version 300 es
+${COMMON}
+uniform vec4 u_shade;      // ambient, diffuse, specular, shininess
+uniform int u_shading;
+uniform vec3 u_bg;
+out vec4 outColor;
+
+void main() {
+  vec3 o, d;
+  pixelRay(o, d);
+  vec3 oi = o * u_is;
+  vec3 di = d * u_is;
+  vec2 t = slab(oi.x, di.x, u_dims.x - 1.0, vec2(0.0, 1e30));
+  t = slab(oi.y, di.y, u_dims.y - 1.0, t);
+  t = slab(oi.z, di.z, u_dims.z - 1.0, t);
+  vec3 l = -u_fwd;
+  vec3 h = l - d;
+  float hn = length(h);
+  h = hn < 1e-12 ? l : h / hn;
+  vec3 acc = vec3(0.0);
+  float tr = 1.0;
+  float scale = float(u_nl - 1);
+  if (t.y >= t.x) {
+    int n = int((t.y - t.x) / u_dt) + 1;
+    int k = 0;
+    while (k < n) {
+      float tt = t.x + float(k) * u_dt;
+      vec3 p = oi + tt * di;
+      ivec3 b = blockOf(p);
+      if (texelFetch(u_vis, b, 0).r < 0.5) {
+        k = skipBlock(b, oi, di, t.x, k);
+        continue;
+      }
+      float x = value(p) * scale;
+      int q = clamp(int(x), 0, u_nl - 2);
+      float f = x - float(q);
+      vec4 c0 = lutAt(q);
+      vec4 c1 = lutAt(q + 1);
+      float a = c0.a * (1.0 - f) + c1.a * f;
+      if (a > 0.0) {
+        vec3 c = c0.rgb * (1.0 - f) + c1.rgb * f;
+        if (u_shading == 1) {
+          vec3 g = 0.5 * vec3(
+            value(p + vec3(1.0, 0.0, 0.0)) - value(p - vec3(1.0, 0.0, 0.0)),
+            value(p + vec3(0.0, 1.0, 0.0)) - value(p - vec3(0.0, 1.0, 0.0)),
+            value(p + vec3(0.0, 0.0, 1.0)) - value(p - vec3(0.0, 0.0, 1.0))) * u_is;
+          float m = length(g);
+          float ndl = 1.0;
+          float sp = 0.0;
+          if (m >= 1e-3) {
+            ndl = abs(dot(g, l)) / m;
+            sp = pow(abs(dot(g, h)) / m, u_shade.w);
+          }
+          float lit = u_shade.x + u_shade.y * ndl;
+          c = min(vec3(1.0), c * lit + u_shade.z * sp);
+        }
+        float w = tr * a;
+        acc += w * c;
+        tr *= 1.0 - a;
+        if (tr < u_tstop) break;
+      }
+      k += 1;
+    }
+  }
+  outColor = vec4(acc + tr * u_bg, 1.0);
+}`;
+
+/** Per-feature attribution (kernels.attribute over the sample cache's nearest-entry samples):
+ * each Gaussian's part of the pixel's accumulated opacity, 16 Gaussians in four RGBA targets. */
+export const ATTRIBUTE = `#version 300 es
+${COMMON}
+uniform vec4 u_gauss[16];  // mean, width, height, unused
+uniform int u_ng;
+layout(location = 0) out vec4 out0;
+layout(location = 1) out vec4 out1;
+layout(location = 2) out vec4 out2;
+layout(location = 3) out vec4 out3;
+
+void main() {
+  vec3 o, d;
+  pixelRay(o, d);
+  vec3 oi = o * u_is;
+  vec3 di = d * u_is;
+  vec2 t = slab(oi.x, di.x, u_dims.x - 1.0, vec2(0.0, 1e30));
+  t = slab(oi.y, di.y, u_dims.y - 1.0, t);
+  t = slab(oi.z, di.z, u_dims.z - 1.0, t);
+  float parts[16];
+  for (int c = 0; c < 16; c++) parts[c] = 0.0;
+  float tr = 1.0;
+  float scale = float(u_nl - 1);
+  if (t.y >= t.x) {
+    int n = int((t.y - t.x) / u_dt) + 1;
+    int k = 0;
+    while (k < n) {
+      float tt = t.x + float(k) * u_dt;
+      vec3 p = oi + tt * di;
+      ivec3 b = blockOf(p);
+      if (texelFetch(u_vis, b, 0).r < 0.5) {
+        k = skipBlock(b, oi, di, t.x, k);
+        continue;
+      }
+      int q = clamp(int(value(p) * scale + 0.5), 0, u_nl - 1);
+      float a = lutAt(q).a;
+      if (a > 0.0) {
+        float s = float(q) / scale;
+        float comps[16];
+        float total = 0.0;
+        for (int c = 0; c < 16; c++) {
+          comps[c] = 0.0;
+          if (c < u_ng) {
+            float z = (s - u_gauss[c].x) / u_gauss[c].y;
+            comps[c] = u_gauss[c].z * exp(-0.5 * z * z);
+            total += comps[c];
+          }
+        }
+        float w = tr * a;
+        if (total > 0.0) {
+          for (int c = 0; c < 16; c++) parts[c] += w * comps[c] / total;
+        }
+        tr *= 1.0 - a;
+        if (tr < u_tstop) break;
+      }
+      k += 1;
+    }
+  }
+  out0 = vec4(parts[0], parts[1], parts[2], parts[3]);
+  out1 = vec4(parts[4], parts[5], parts[6], parts[7]);
+  out2 = vec4(parts[8], parts[9], parts[10], parts[11]);
+  out3 = vec4(parts[12], parts[13], parts[14], parts[15]);
+}`;

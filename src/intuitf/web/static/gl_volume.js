@@ -1,0 +1,183 @@
+// A volume for the page's renderer: fetched once from GET /api/volumes/{id}/texture (the
+// browser keeps it: ETag + no-cache), with the block value ranges of empty-space skipping.
+//
+// Large volumes stream in with progress and their block ranges are computed a few slices at a
+// time, yielding to the page in between, so a clinical volume never freezes the view. The
+// request names the page's limits (its MAX_3D_TEXTURE_SIZE and a memory budget); the server
+// downsamples to fit them and says by how much.
+
+/** Block edge (cells) of the empty-space-skipping grid (render/renderer.py BLOCK_SIZE). */
+export const BLOCK_SIZE = 8;
+
+let halfTable = null;
+
+/** IEEE half float bits → float (a 65536-entry table, built once). */
+function halfToFloat() {
+  if (halfTable) return halfTable;
+  halfTable = new Float32Array(65536);
+  for (let h = 0; h < 65536; h++) {
+    const s = h & 0x8000 ? -1 : 1;
+    const e = (h >> 10) & 0x1f;
+    const m = h & 0x3ff;
+    let v;
+    if (e === 0) v = m * 2 ** -24;
+    else if (e === 31) v = m ? NaN : Infinity;
+    else v = (1 + m / 1024) * 2 ** (e - 15);
+    halfTable[h] = s * v;
+  }
+  return halfTable;
+}
+
+const nextTick = () => new Promise((r) => setTimeout(r, 0));
+
+/**
+ * Fetch a volume's texture. `limits` = {maxBytes, maxSide}; `onProgress(fraction)`; `signal`
+ * aborts. Resolves to {id, dims, fullDims, spacing, step, format, map, lutSize, dtype, data}.
+ */
+export async function fetchVolume(id, limits, { onProgress, signal } = {}) {
+  const q = new URLSearchParams({ max_bytes: String(Math.floor(limits.maxBytes)), max_side: String(limits.maxSide) });
+  const resp = await fetch(`/api/volumes/${encodeURIComponent(id)}/texture?${q}`, {
+    credentials: "same-origin",
+    cache: "no-cache", // revalidate: a 304 when the browser's copy is current
+    signal,
+  });
+  if (!resp.ok) {
+    let detail = `HTTP ${resp.status}`;
+    try {
+      const j = await resp.json();
+      detail = j.detail || detail;
+    } catch (_) {
+      /* not JSON */
+    }
+    throw new Error(detail);
+  }
+  const h = (k) => resp.headers.get(k) || "";
+  const nums = (k) => h(k).split(",").map(Number);
+  const dims = nums("X-Volume-Dims");
+  const format = h("X-Volume-Format");
+  const bytes = dims[0] * dims[1] * dims[2] * (format === "r8" ? 1 : 2);
+  const buf = new Uint8Array(bytes);
+  let got = 0;
+  if (resp.body && resp.body.getReader) {
+    const reader = resp.body.getReader();
+    for (;;) {
+      const { done, value } = await reader.read();
+      if (done) break;
+      if (got + value.length > bytes) throw new Error("The volume's texture is longer than its header says.");
+      buf.set(value, got);
+      got += value.length;
+      if (onProgress) onProgress(got / bytes);
+    }
+  } else {
+    const all = new Uint8Array(await resp.arrayBuffer());
+    buf.set(all.subarray(0, bytes));
+    got = all.length;
+  }
+  if (got !== bytes) throw new Error(`The volume's texture is ${got} bytes, its header says ${bytes}.`);
+  const [scale, offset] = nums("X-Volume-Map");
+  return {
+    id,
+    dims,
+    fullDims: nums("X-Volume-Full-Dims"),
+    spacing: nums("X-Volume-Spacing"),
+    step: Number(h("X-Volume-Step")) || 1,
+    format,
+    map: [scale, offset],
+    lutSize: Number(h("X-Volume-Lut-Size")) || 256,
+    dtype: h("X-Volume-Dtype"),
+    data: format === "r8" ? buf : new Uint16Array(buf.buffer),
+  };
+}
+
+/** Number of blocks along an axis of n voxels (at least 1). */
+export function blockCount(n) {
+  return Math.max(1, Math.ceil((n - 1) / BLOCK_SIZE));
+}
+
+/**
+ * Per block of BLOCK_SIZE cells (its voxels plus one), the min and max normalised value its
+ * samples can take: {nb: [nbx, nby, nbz], min, max} (Float32Arrays, x fastest). Works through
+ * the volume a slab at a time, yielding to the page between slabs.
+ */
+export async function blockRanges(vol) {
+  const [nx, ny, nz] = vol.dims;
+  const nb = [blockCount(nx), blockCount(ny), blockCount(nz)];
+  const nBlocks = nb[0] * nb[1] * nb[2];
+  const bmin = new Float32Array(nBlocks).fill(Infinity);
+  const bmax = new Float32Array(nBlocks).fill(-Infinity);
+  const data = vol.data;
+  const half = vol.format === "r8" ? null : halfToFloat();
+  const rowMin = new Float32Array(nb[0]);
+  const rowMax = new Float32Array(nb[0]);
+  // The blocks (along one axis) that voxel i belongs to: floor(i / B) and, on a boundary, the one before.
+  const owners = (i, n) => {
+    const b = Math.floor(i / BLOCK_SIZE);
+    const out = [];
+    if (b < n) out.push(b);
+    if (i % BLOCK_SIZE === 0 && b > 0) out.push(b - 1);
+    return out;
+  };
+  const yOwners = Array.from({ length: ny }, (_, y) => owners(y, nb[1]));
+  let lastYield = performance.now();
+  for (let z = 0; z < nz; z++) {
+    const zOwn = owners(z, nb[2]);
+    for (let y = 0; y < ny; y++) {
+      rowMin.fill(Infinity);
+      rowMax.fill(-Infinity);
+      const base = (z * ny + y) * nx;
+      for (let bx = 0; bx < nb[0]; bx++) {
+        const x0 = bx * BLOCK_SIZE;
+        const x1 = Math.min(x0 + BLOCK_SIZE, nx - 1);
+        let lo = Infinity;
+        let hi = -Infinity;
+        for (let x = x0; x <= x1; x++) {
+          const v = half ? half[data[base + x]] : data[base + x];
+          if (v < lo) lo = v;
+          if (v > hi) hi = v;
+        }
+        rowMin[bx] = lo;
+        rowMax[bx] = hi;
+      }
+      for (const bz of zOwn) {
+        for (const by of yOwners[y]) {
+          const o = (bz * nb[1] + by) * nb[0];
+          for (let bx = 0; bx < nb[0]; bx++) {
+            if (rowMin[bx] < bmin[o + bx]) bmin[o + bx] = rowMin[bx];
+            if (rowMax[bx] > bmax[o + bx]) bmax[o + bx] = rowMax[bx];
+          }
+        }
+      }
+    }
+    if (performance.now() - lastYield > 30) {
+      await nextTick();
+      lastYield = performance.now();
+    }
+  }
+  // To normalised values (r8 holds the original integers: normalised = byte / 255 * scale + offset).
+  const [scale, offset] = vol.format === "r8" ? [vol.map[0] / 255, vol.map[1]] : [1, 0];
+  for (let i = 0; i < nBlocks; i++) {
+    bmin[i] = bmin[i] * scale + offset;
+    bmax[i] = bmax[i] * scale + offset;
+  }
+  return { nb, min: bmin, max: bmax };
+}
+
+/**
+ * Which blocks a TF can see (1) or skips (0): those whose LUT index range [floor(min·(L-1)),
+ * ceil(max·(L-1))] holds an entry with non-zero alpha (`occ` from gl_tf.occupancy).
+ */
+export function visibleBlocks(blocks, occ, out) {
+  const L = occ.length - 1;
+  const s = L - 1;
+  const n = blocks.min.length;
+  const vis = out && out.length === n ? out : new Uint8Array(n);
+  for (let i = 0; i < n; i++) {
+    // A hair wider than the server's range, never narrower: skipping stays conservative.
+    let lo = Math.floor(blocks.min[i] * s - 1e-4);
+    let hi = Math.ceil(blocks.max[i] * s + 1e-4);
+    lo = lo < 0 ? 0 : lo > s ? s : lo;
+    hi = hi < 0 ? 0 : hi > s ? s : hi;
+    vis[i] = occ[hi + 1] > occ[lo] ? 255 : 0;
+  }
+  return vis;
+}
