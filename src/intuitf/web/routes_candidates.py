@@ -115,9 +115,8 @@ async def candidate_image(
     )
 
 
-@router.post("/candidates/{run}/{cid}/pick", response_model=PickOut)
-async def pick(request: Request, run: str, cid: str, body: PickIn) -> dict:
-    web = state(request)
+def check_pick(body: PickIn):
+    """The camera and size of a pick request (422 for a pixel outside the view)."""
     camera, size = camera_of(body.camera), check_size(body.size)
     if not (0 <= body.x < size and 0 <= body.y < size):
         raise ApiError(
@@ -125,11 +124,15 @@ async def pick(request: Request, run: str, cid: str, body: PickIn) -> dict:
             f"Pixel ({body.x}, {body.y}) is outside the {size}×{size} view.",
             "Give x and y from the top-left corner, within the view's size.",
         )
-    info, volume = await _candidate_and_volume(web, _qid(run, cid))
+    return camera, size
+
+
+async def pick_result(web, tf, volume, body: PickIn, camera, size: int) -> dict:
+    """What a click at ``(body.x, body.y)`` picks of ``tf`` over ``volume``."""
     vr = web.view_renderer(volume, background_of(body.background))
     try:
         result = await render_scheduler().run(
-            lambda: vr.pick(info.tf, camera, body.x, body.y, size, body.shaded), INTERACTIVE
+            lambda: vr.pick(tf, camera, body.x, body.y, size, body.shaded), INTERACTIVE
         )
     except IntuitfError as exc:
         raise user_error(exc) from None
@@ -143,17 +146,30 @@ async def pick(request: Request, run: str, cid: str, body: PickIn) -> dict:
     }
 
 
-@router.post("/candidates/{run}/{cid}/features", response_model=list[FeatureOut])
-async def features(request: Request, run: str, cid: str, body: FeaturesIn) -> list[dict]:
+@router.post("/candidates/{run}/{cid}/pick", response_model=PickOut)
+async def pick(request: Request, run: str, cid: str, body: PickIn) -> dict:
     web = state(request)
-    camera, size = camera_of(body.camera), check_size(body.size)
+    camera, size = check_pick(body)
     info, volume = await _candidate_and_volume(web, _qid(run, cid))
+    return await pick_result(web, info.tf, volume, body, camera, size)
+
+
+async def feature_tiles(web, tf, volume, body: FeaturesIn) -> list[dict]:
+    """Each Gaussian of ``tf`` rendered alone over ``volume``, as PNG data URLs."""
+    camera, size = camera_of(body.camera), check_size(body.size)
     vr = web.view_renderer(volume, background_of(body.background))
     images = await render_scheduler().run(
-        lambda: vr.features(info.tf, camera, size, body.shaded), INTERACTIVE
+        lambda: vr.features(tf, camera, size, body.shaded), INTERACTIVE
     )
     urls = await asyncio.to_thread(lambda: [data_url_png(im) for im in images])
     return [{"index": i, "image": u} for i, u in enumerate(urls)]
+
+
+@router.post("/candidates/{run}/{cid}/features", response_model=list[FeatureOut])
+async def features(request: Request, run: str, cid: str, body: FeaturesIn) -> list[dict]:
+    web = state(request)
+    info, volume = await _candidate_and_volume(web, _qid(run, cid))
+    return await feature_tiles(web, info.tf, volume, body)
 
 
 @router.post("/edits", response_model=EditOut, status_code=201)

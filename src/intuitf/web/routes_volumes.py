@@ -19,6 +19,15 @@ from intuitf.web.common import (
     state,
     tf_of,
 )
+from intuitf.web.routes_candidates import (
+    FeatureOut,
+    FeaturesIn,
+    PickIn,
+    PickOut,
+    check_pick,
+    feature_tiles,
+    pick_result,
+)
 
 router = APIRouter(prefix="/api", tags=["volumes"])
 
@@ -103,6 +112,35 @@ async def upload_picture(request: Request, file: UploadFile = File(...)) -> dict
     web = state(request)
     data = await read_limited(file, min(web.max_upload_bytes, 64 * 1024 * 1024))
     return await asyncio.to_thread(web.pictures.save, data)
+
+
+class VolumePickIn(PickIn):
+    tf: dict[str, Any]
+
+
+class VolumeFeaturesIn(FeaturesIn):
+    tf: dict[str, Any]
+
+
+@router.post("/volumes/{volume_id}/pick", response_model=PickOut)
+async def volume_pick(request: Request, volume_id: str, body: VolumePickIn) -> dict:
+    """A click on a volume's preview (a TF not yet in any run): the feature under it."""
+    web = state(request)
+    entry = web.catalog.get(volume_id)
+    tf = tf_of(body.tf)
+    camera, size = check_pick(body)
+    volume = await asyncio.to_thread(web.catalog.load, entry.id)
+    return await pick_result(web, tf, volume, body, camera, size)
+
+
+@router.post("/volumes/{volume_id}/features", response_model=list[FeatureOut])
+async def volume_features(request: Request, volume_id: str, body: VolumeFeaturesIn) -> list[dict]:
+    """Each Gaussian of a preview's TF rendered alone over the volume."""
+    web = state(request)
+    entry = web.catalog.get(volume_id)
+    tf = tf_of(body.tf)
+    volume = await asyncio.to_thread(web.catalog.load, entry.id)
+    return await feature_tiles(web, tf, volume, body)
 
 
 @router.post("/tf/preview", response_class=Response, responses=PNG)

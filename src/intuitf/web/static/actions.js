@@ -86,6 +86,29 @@ export async function selectRun(name, { qid = null, follow = null } = {}) {
   writeHash();
 }
 
+/** Show volume `id` on its own, with no run current: the view previews it (a TF on its
+ * histogram's materials), a click picks its features, and Start begins a run on it. */
+export function previewVolume(id) {
+  if (events) {
+    events.close();
+    events = null;
+    eventsRun = null;
+  }
+  set({
+    volumeId: id,
+    run: null,
+    runDetail: null,
+    current: null,
+    candidate: null,
+    selected: new Set(),
+    pick: null,
+    draft: null,
+    marked: [],
+    live: null,
+  });
+  writeHash();
+}
+
 /** The newest best candidate of run `name` (from its details, else the history tree). */
 export function bestOf(name) {
   const d = state.runDetail;
@@ -234,13 +257,19 @@ function handleEvent(name, ev) {
 
 // -- the address bar remembers where we are --------------------------------------------------------
 export function writeHash() {
-  const h = state.current ? `#c=${state.current}` : state.run ? `#run=${state.run}` : "";
+  const h = state.current
+    ? `#c=${state.current}`
+    : state.run
+      ? `#run=${state.run}`
+      : state.volumeId
+        ? `#v=${encodeURIComponent(state.volumeId)}`
+        : "";
   if (window.location.hash !== h) window.history.replaceState(null, "", window.location.pathname + window.location.search + h);
 }
 
 export function readHash() {
   const h = new URLSearchParams(window.location.hash.slice(1));
-  return { qid: h.get("c"), run: h.get("run") };
+  return { qid: h.get("c"), run: h.get("run"), volume: h.get("v") };
 }
 
 /** Poll the history while some run (in any tab) is running, so every tab stays current. */

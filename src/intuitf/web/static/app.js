@@ -1,13 +1,13 @@
 // intuitf in the browser: boots the views, the top bar (volume, live progress) and the export menu.
 
 import * as api from "./api.js";
-import { readHash, refreshTree, selectRun, setCurrent, startTreePolling } from "./actions.js";
+import { bestOf, previewVolume, readHash, refreshTree, selectRun, setCurrent, startTreePolling } from "./actions.js";
 import { initFeatures } from "./features.js";
 import { initGallery } from "./gallery.js";
 import { initHistory } from "./history.js";
 import { showError, showMessage } from "./messages.js";
 import { initQuery } from "./query.js";
-import { el, fmtSeconds, fmtUsd, on, set, setErrorSink, splitQid, state } from "./state.js";
+import { el, fmtSeconds, fmtUsd, generationOf, on, set, setErrorSink, splitQid, state } from "./state.js";
 import { initTfEditor } from "./tf_editor.js";
 import { initVolumeView } from "./volume_view.js";
 
@@ -42,21 +42,39 @@ async function boot() {
     const [info, volumes] = await Promise.all([api.get("/api/info"), api.get("/api/volumes")]);
     set({ info, volumes });
     document.getElementById("version").textContent = `v${info.version || "?"}`;
-    const phantom = volumes.find((v) => v.id === "phantom");
-    set({ volumeId: (phantom || volumes[0] || {}).id || null });
   } catch (err) {
     showError(err);
   }
+  // What the address names comes first: no volume is previewed before it (a candidate's
+  // page never shows another volume while it loads).
   await refreshTree();
-  const { qid, run } = readHash();
-  if (qid && splitQid(qid)) await setCurrent(qid, { follow: false });
-  else if (run) await selectRun(run);
+  const { qid, run, volume } = readHash();
+  const known = (id) => state.volumes.some((v) => v.id === id);
+  if (qid && splitQid(qid)) await openCandidate(qid);
+  else if (run) await selectRun(run, { follow: true });
+  else if (volume && known(volume)) previewVolume(volume);
   else {
     const latest = newestRun(state.tree);
     if (latest) await selectRun(latest.name, { follow: latest.status === "running" });
+    else {
+      const phantom = state.volumes.find((v) => v.id === "phantom");
+      previewVolume((phantom || state.volumes[0] || {}).id || null);
+    }
   }
   startTreePolling();
   document.body.classList.add("ready");
+}
+
+/** Open candidate `qid` from the address. A reloaded live run whose newest best was on
+ * view goes on following its newest best (the address then names it). */
+async function openCandidate(qid) {
+  const { run } = splitQid(qid);
+  await setCurrent(qid, { follow: false });
+  const d = state.runDetail;
+  if (!d || d.info.name !== run || d.info.status !== "running") return;
+  const best = bestOf(run);
+  const newest = (q) => generationOf(q) ?? -1;
+  if (best && newest(qid) >= newest(best) - 1) await setCurrent(best, { keepRun: true, follow: true });
 }
 
 function newestRun(tree) {
@@ -73,7 +91,9 @@ function newestRun(tree) {
 // -- the top bar: volumes and live progress ------------------------------------------------------------
 function initTopbar() {
   const select = document.getElementById("volume-select");
-  select.addEventListener("change", () => set({ volumeId: select.value }));
+  // Choosing a volume leaves the current run: the view previews the volume, and Start
+  // begins a run on it (the choice holds while runs go on elsewhere).
+  select.addEventListener("change", () => previewVolume(select.value));
   on(["volumes", "volumeId"], () => {
     select.replaceChildren(
       ...state.volumes.map((v) =>
@@ -82,10 +102,17 @@ function initTopbar() {
     );
     if (state.volumeId) select.value = state.volumeId;
   });
+  // The picker shows the volume of a run when that run becomes current (once: the details
+  // that later refreshes bring never override what a person chose meanwhile).
+  let shownFor = null;
+  on("run", () => {
+    shownFor = null;
+  });
   on("runDetail", () => {
-    // The volume picker follows the current run (a new run starts on what it shows).
     const d = state.runDetail;
-    const id = d && (d.volume_id || (state.volumes.find((v) => v.id === d.info.volume || v.name === d.info.volume) || {}).id);
+    if (!d || shownFor === d.info.name) return;
+    shownFor = d.info.name;
+    const id = d.volume_id || (state.volumes.find((v) => v.id === d.info.volume || v.name === d.info.volume) || {}).id;
     if (id && id !== state.volumeId && state.volumes.some((v) => v.id === id)) set({ volumeId: id });
   });
   const file = document.getElementById("volume-upload");
@@ -95,7 +122,8 @@ function initTopbar() {
     showMessage(`Uploading ${f.name}…`, { kind: "info", timeout: 3000 });
     try {
       const v = await api.upload("/api/volumes", f, f.name);
-      set({ volumes: [...state.volumes.filter((x) => x.id !== v.id), v], volumeId: v.id });
+      set({ volumes: [...state.volumes.filter((x) => x.id !== v.id), v] });
+      previewVolume(v.id);
       showMessage(`Loaded ${v.name || v.id}.`, { kind: "ok" });
     } catch (err) {
       showError(err);
@@ -103,7 +131,7 @@ function initTopbar() {
       file.value = "";
     }
   });
-  on(["runDetail", "progressTick", "live", "serverDown"], renderProgress);
+  on(["runDetail", "progressTick", "live", "serverDown", "volumeId", "run"], renderProgress);
   renderProgress();
 }
 
@@ -113,7 +141,12 @@ function renderProgress() {
   const box = document.getElementById("progress");
   const d = state.runDetail;
   if (!d) {
-    box.replaceChildren(el("span.muted", { text: state.run ? `${state.run}: loading…` : "no run yet" }));
+    const text = state.run
+      ? `${state.run}: loading…`
+      : state.volumeId
+        ? `previewing ${state.volumeId}: Start begins a run on it`
+        : "no run yet";
+    box.replaceChildren(el("span.muted", { text }));
     box.dataset.status = "";
     return;
   }

@@ -4,7 +4,8 @@
 
 import * as api from "./api.js";
 import { showError } from "./messages.js";
-import { el, hexToRgb, on, rgbToHex, set, splitQid, state } from "./state.js";
+import { el, hexToRgb, on, rgbToHex, set, shownTF, splitQid, state } from "./state.js";
+import { pageFeatures } from "./volume_view.js";
 
 const TILE = 128;
 
@@ -20,7 +21,7 @@ export function initFeatures() {
   note = document.getElementById("features-note");
   clearBtn = document.getElementById("features-clear");
   clearBtn.addEventListener("click", () => set({ selected: new Set() }));
-  on(["candidate", "viewSettled", "shaded", "background"], schedule);
+  on(["candidate", "viewSettled", "shaded", "background", "histogram", "run", "volumeId"], schedule);
   on(["selected"], markSelection);
   render([]);
 }
@@ -30,10 +31,20 @@ function schedule() {
   pending = setTimeout(load, 250);
 }
 
-async function load() {
+/** The TF whose features are shown, and where to ask for them: the current candidate, or
+ * the preview of a volume with no run (its TF on the histogram's materials). */
+function source() {
   const cand = state.candidate;
   const cur = splitQid(state.current);
-  if (!cand || !cur) {
+  if (cand && cur) return { tf: cand.tf, path: `/api/candidates/${api.enc(cur.run)}/${api.enc(cur.cid)}/features`, key: state.current };
+  const tf = !state.run && !state.current && !state.draft ? shownTF() : null;
+  if (tf && state.volumeId) return { tf, path: `/api/volumes/${api.enc(state.volumeId)}/features`, key: `volume:${state.volumeId}`, body: { tf } };
+  return null;
+}
+
+async function load() {
+  const src = source();
+  if (!src) {
     shownKey = "";
     render([]);
     return;
@@ -45,12 +56,20 @@ async function load() {
     shaded: state.shaded,
     background: hexToRgb(state.background),
   };
-  const key = JSON.stringify([state.current, body]);
+  Object.assign(body, src.body || {});
+  const key = JSON.stringify([src.key, body]);
   if (key === shownKey) return;
   const my = ++ticket;
+  // Where the page renders the view itself (WebGL2), it draws the strip too.
+  const local = pageFeatures(TILE);
+  if (local) {
+    shownKey = key;
+    render(local);
+    return;
+  }
   strip.classList.add("loading");
   try {
-    const feats = await api.post(`/api/candidates/${api.enc(cur.run)}/${api.enc(cur.cid)}/features`, body);
+    const feats = await api.post(src.path, body);
     if (my !== ticket) return;
     shownKey = key;
     render(feats);
@@ -62,9 +81,10 @@ async function load() {
 }
 
 function render(feats) {
-  const tf = state.candidate && state.candidate.tf;
+  const src = source();
+  const tf = src && src.tf;
   if (!feats.length || !tf) {
-    strip.replaceChildren(el("p.empty", { text: state.candidate ? "Rendering each feature alone…" : "Each feature of the current result appears here on its own." }));
+    strip.replaceChildren(el("p.empty", { text: tf ? "Rendering each feature alone…" : "Each feature of the current result appears here on its own." }));
     markSelection();
     return;
   }

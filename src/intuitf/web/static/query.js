@@ -9,7 +9,7 @@
 import * as api from "./api.js";
 import { refreshRun, refreshTree, selectRun, startRun } from "./actions.js";
 import { showError, showMessage } from "./messages.js";
-import { el, on, set, splitQid, state } from "./state.js";
+import { el, on, set, shownTF, splitQid, state } from "./state.js";
 import { renderSize, resetCamera } from "./volume_view.js";
 
 let kind = "text";
@@ -42,6 +42,7 @@ export function initQuery() {
   $("run-pause").addEventListener("click", pauseOrResume);
   $("run-stop").addEventListener("click", stop);
   $("run-continue").addEventListener("click", continueRun);
+  $("q-text").addEventListener("input", syncButtons);
   $("q-text").addEventListener("keydown", (e) => {
     if (e.key === "Enter" && (e.ctrlKey || e.metaKey)) start();
   });
@@ -65,7 +66,7 @@ export function initQuery() {
   new ResizeObserver(drawStrokes).observe(sketchCanvas);
 
   on(["info"], fillEvaluators);
-  on(["run", "runDetail", "selected", "current"], syncButtons);
+  on(["run", "runDetail", "selected", "current", "volumeId"], syncButtons);
   on(["current"], () => {
     if (state.sketching && !state.current) setSketching(false);
   });
@@ -142,7 +143,13 @@ function syncButtons() {
   const startBtn = $("q-start");
   $("q-refine-note").hidden = !n;
   $("q-refine-note").textContent = n ? `Refining ${n} selected feature${n > 1 ? "s" : ""} of ${state.current}: only ${n > 1 ? "they change" : "it changes"}.` : "";
+  const words = $("q-text").value.trim();
   startBtn.textContent = n ? `Refine ${n} feature${n > 1 ? "s" : ""}` : mode === "continue" && state.run ? "Continue with this query" : "Start";
+  startBtn.title =
+    !n && mode === "new" && kind === "text" && !words
+      ? "With no words: find the volume's structures first (quality only); say what you want later"
+      : "";
+  if (n && !state.current && !state.run) $("q-refine-note").textContent = `Refining ${n} selected feature${n > 1 ? "s" : ""} of the preview in a new run: only ${n > 1 ? "they change" : "it changes"}.`;
   $("sketch-draw").disabled = !state.current;
   $("sketch-draw").textContent = state.sketching ? "Done drawing" : "Draw on the rendering";
 }
@@ -256,8 +263,11 @@ function sketchBlob() {
 }
 
 // -- start, pause, stop ---------------------------------------------------------------------------
-async function intentFromPanel(text) {
+async function intentFromPanel(text, { firstStage = false } = {}) {
   if (kind === "text") {
+    // No words on a new run: the paper's first stage (quality only, to find the structures);
+    // words come later, as a new stage or a refinement of the features found.
+    if (!text && firstStage) return { kind: "none" };
     if (!text) throw new UserError("Type what you want to see first.");
     return { kind: "text", text };
   }
@@ -302,7 +312,20 @@ async function start() {
   btn.disabled = true;
   try {
     const cur = splitQid(state.current);
-    if (state.selected.size && cur) {
+    const preview = !state.run && !cur && shownTF();
+    if (state.selected.size && preview) {
+      // Features picked on a volume's preview: a run that refines only those, from the preview.
+      if (!text) throw new UserError("Say what should change about the selected features (e.g. “make it transparent”).");
+      const selected = [...state.selected].sort((a, b) => a - b);
+      const s = settings();
+      await startRun({
+        volume: state.volumeId,
+        intent: { kind: "edit", text, selected },
+        initial: [preview],
+        judge: judgeSpec(),
+        settings: s,
+      });
+    } else if (state.selected.size && cur) {
       if (!text) throw new UserError("Say what should change about the selected features (e.g. “make it transparent”).");
       const body = { candidate: cur.cid, selected: [...state.selected].sort((a, b) => a - b), text };
       const g = num("q-generations");
@@ -323,7 +346,7 @@ async function start() {
       showMessage(`${state.run} goes on with your query.`, { kind: "ok" });
     } else {
       if (!state.volumeId) throw new UserError("Choose a volume first (top left).");
-      const intent = await intentFromPanel(text);
+      const intent = await intentFromPanel(text, { firstStage: true });
       await startRun({ volume: state.volumeId, intent, judge: judgeSpec(), settings: settings() });
     }
     if (state.sketching) setSketching(false);

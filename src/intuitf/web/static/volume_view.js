@@ -289,13 +289,20 @@ async function pickAt(e, add) {
   const x = Math.min(viewSize - 1, Math.max(0, Math.floor(((e.clientX - r.left) / r.width) * viewSize)));
   const y = Math.min(viewSize - 1, Math.max(0, Math.floor(((e.clientY - r.top) / r.height) * viewSize)));
   const cur = splitQid(state.current);
-  if (!cur || state.draft) {
+  const t = target();
+  const preview = !cur && t && t.volume && !state.draft ? t : null; // a volume before any run
+  if ((!cur && !preview) || state.draft) {
     if (state.draft) showMessage("Keep or discard the hand edit before selecting features.", { kind: "info" });
     return;
   }
   const camera = cameraJSON();
+  const was = state.current;
   try {
-    const res = await api.post(`/api/candidates/${api.enc(cur.run)}/${api.enc(cur.cid)}/pick`, {
+    const path = preview
+      ? `/api/volumes/${api.enc(preview.volume)}/pick`
+      : `/api/candidates/${api.enc(cur.run)}/${api.enc(cur.cid)}/pick`;
+    const res = await api.post(path, {
+      ...(preview ? { tf: preview.tf } : {}),
       camera,
       x,
       y,
@@ -303,7 +310,7 @@ async function pickAt(e, add) {
       shaded: state.shaded,
       background: hexToRgb(state.background), // the still's background: one sample cache for both
     });
-    if (state.current !== `${cur.run}/${cur.cid}`) return;
+    if (state.current !== was) return;
     state.follow = false;
     let selected;
     if (res.index === null || res.index === undefined) {
