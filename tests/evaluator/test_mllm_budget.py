@@ -7,12 +7,12 @@ import asyncio
 import pytest
 
 from intuitf.errors import BudgetExhausted
-from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.budget import Budget
 from intuitf.evaluator.cache import VerdictCache
 from intuitf.evaluator.mllm import MLLMJudge
 from intuitf.evaluator.pricing import PriceTable
 from intuitf.evaluator.types import Intent
+from intuitf.intent.aspects import aspects_for
 from intuitf.testing.fake_mllm import FakeMLLMServer
 
 Q = aspects_for("quality")

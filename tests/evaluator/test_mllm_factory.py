@@ -20,7 +20,8 @@ def test_provider_specs(monkeypatch):
     assert j.base_url == "https://api.openai.com/v1/"
     g = make_judge("gemini:gemini-2.5-flash")
     assert g.base_url == "https://generativelanguage.googleapis.com/v1beta/openai/"
-    assert make_judge("openai").model == "gpt-4o"  # the provider's default model
+    assert make_judge("openai").model == "gpt-5.4-mini"  # the preset's current default model
+    assert make_judge("gemini").model == "gemini-2.5-flash"  # 2.0-flash is retired
     assert make_judge("ollama:qwen2.5vl:7b").model == "qwen2.5vl:7b"
     assert make_judge("ollama:x").base_url == "http://localhost:11434/v1/"
     assert make_judge("vllm:m").base_url == "http://localhost:8000/v1/"

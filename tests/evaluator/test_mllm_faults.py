@@ -10,10 +10,10 @@ import time
 import pytest
 
 from intuitf.errors import JudgeError
-from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.cache import VerdictCache
 from intuitf.evaluator.mllm import MLLMJudge
 from intuitf.evaluator.types import Choice, Intent
+from intuitf.intent.aspects import aspects_for
 from intuitf.testing.fake_mllm import FakeMLLMServer
 
 Q = aspects_for("quality")

@@ -8,9 +8,9 @@ import itertools
 import numpy as np
 import pytest
 
-from intuitf.intent.aspects import aspects_for, aspects_for_intent
 from intuitf.evaluator.mllm import MLLMJudge
 from intuitf.evaluator.types import Choice, Intent, Judge
+from intuitf.intent.aspects import aspects_for, aspects_for_intent
 from intuitf.testing.fake_mllm import FakeMLLMServer
 
 Q = aspects_for("quality")

@@ -8,12 +8,12 @@ import logging
 import pytest
 
 from intuitf.errors import JudgeError
-from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.cache import VerdictCache
 from intuitf.evaluator.factory import make_judge
 from intuitf.evaluator.mllm import MLLMJudge
 from intuitf.evaluator.providers import NO_KEY, PROVIDERS, resolve_api_key
 from intuitf.evaluator.types import Intent
+from intuitf.intent.aspects import aspects_for
 from intuitf.testing.fake_mllm import FakeMLLMServer
 
 SECRET = "sk-test-9f8e7d6c5b4a-SECRET"

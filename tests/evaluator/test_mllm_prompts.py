@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from intuitf.errors import JudgeError
-from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.compose import (
     BEFORE_LABEL,
     FIRST_LABEL,
@@ -25,6 +24,7 @@ from intuitf.evaluator.compose import (
 )
 from intuitf.evaluator.prompts import SYSTEM_PROMPT, answer_schema, response_format, user_prompt
 from intuitf.evaluator.types import Intent
+from intuitf.intent.aspects import aspects_for
 
 RNG = np.random.default_rng(3)
 A = RNG.integers(0, 256, (40, 50, 3), dtype=np.uint8)

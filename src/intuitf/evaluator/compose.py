@@ -236,8 +236,15 @@ def intent_images(intent: Intent) -> list[LabelledImage]:
 def comparison_images(
     first: np.ndarray, second: np.ndarray, intent: Intent, layout: Layout = "parts"
 ) -> list[LabelledImage]:
-    """All images of one comparison in the order they are sent: intent images, then candidates."""
-    parts = intent_images(intent)
+    """All images of one comparison in the order they are sent: intent images, then candidates.
+
+    The intent's pictures are scaled down to the candidates' size (a 12-megapixel reference
+    photo would otherwise be tens of megabytes per request, and the model sees it no better).
+    """
+    longest = max(*np.asarray(first).shape[:2], *np.asarray(second).shape[:2])
+    parts = [
+        LabelledImage(p.role, p.label, fit_to(p.image, longest)) for p in intent_images(intent)
+    ]
     if layout == "side_by_side":
         parts.append(LabelledImage("pair", PAIR_LABEL, side_by_side(first, second)))
     elif layout == "parts":
@@ -248,12 +255,70 @@ def comparison_images(
     return parts
 
 
+#: Roles of the intent's pictures (context), as opposed to the candidates.
+CONTEXT_ROLES = ("reference", "sketch", "before", "selection")
+#: A context picture is sent as PNG when that is this small, or not much larger than as JPEG
+#: (flat strokes and outlines compress well losslessly; photographs do not).
+PNG_CONTEXT_BYTES = 48_000
+PNG_OVER_JPEG = 1.5
+
+
+def fit_to(arr: np.ndarray, longest: int) -> np.ndarray:
+    """``arr`` scaled down (never up) so that its longer side is at most ``longest`` pixels."""
+    h, w = arr.shape[:2]
+    if max(h, w) <= longest:
+        return arr
+    scale = longest / max(h, w)
+    size = (max(1, round(w * scale)), max(1, round(h * scale)))
+    return np.asarray(Image.fromarray(arr).resize(size, Image.Resampling.LANCZOS))
+
+
+def _context_uri(arr: np.ndarray, quality: int) -> str:
+    """A context picture: PNG where that is small (lossless strokes and outlines), else JPEG."""
+    png = data_uri(arr, "png")
+    if len(png) * 3 // 4 <= PNG_CONTEXT_BYTES:
+        return png
+    jpeg = data_uri(arr, "jpeg", quality)
+    return png if len(png) <= PNG_OVER_JPEG * len(jpeg) else jpeg
+
+
 def content_parts(
-    images: list[LabelledImage], fmt: ImageFormat = "png", quality: int = 90
+    images: list[LabelledImage],
+    fmt: ImageFormat = "png",
+    quality: int = 90,
+    max_bytes: int | None = None,
 ) -> list[dict]:
-    """Chat-completions content parts: a text label then an ``image_url`` part, per image."""
-    out: list[dict] = []
-    for item in images:
-        out.append({"type": "text", "text": item.label})
-        out.append({"type": "image_url", "image_url": {"url": data_uri(item.image, fmt, quality)}})
-    return out
+    """Chat-completions content parts: a text label then an ``image_url`` part, per image.
+
+    Candidates are encoded as ``fmt``; the intent's pictures as PNG when small, else JPEG.
+    With ``max_bytes``, a request whose images would be larger is re-encoded as JPEG of falling
+    quality, then at smaller sizes, until it fits (Gemini takes 20 MB of inline data, many
+    servers less); :class:`JudgeError` if even the smallest does not.
+    """
+    attempts: list[tuple[str, int, float]] = [("as given", quality, 1.0)]
+    if max_bytes is not None:
+        attempts += [("jpeg", 85, 1.0), ("jpeg", 70, 1.0), ("jpeg", 70, 0.75), ("jpeg", 60, 0.5)]
+    total = 0
+    for mode, q, scale in attempts:
+        out: list[dict] = []
+        total = 0
+        for item in images:
+            arr = item.image
+            if scale < 1.0:
+                arr = fit_to(arr, max(16, round(max(arr.shape[:2]) * scale)))
+            if mode == "jpeg":
+                uri = data_uri(arr, "jpeg", q)
+            elif item.role in CONTEXT_ROLES:
+                uri = _context_uri(arr, q)
+            else:
+                uri = data_uri(arr, fmt, q)
+            total += len(uri)
+            out.append({"type": "text", "text": item.label})
+            out.append({"type": "image_url", "image_url": {"url": uri}})
+        if max_bytes is None or total <= max_bytes:
+            return out
+    raise JudgeError(
+        f"The images of one comparison take {total / 1e6:.1f} MB even as small JPEGs, more "
+        f"than the request limit of {max_bytes / 1e6:.1f} MB.",  # type: ignore[operator]
+        "Judge at a smaller --size, or raise the judge's max_request_mb.",
+    )

@@ -6,7 +6,8 @@ Specs:
 - ``"PROVIDER:MODEL"`` for PROVIDER in openai, gemini, ollama, vllm, lmstudio, openrouter
   (``"PROVIDER"`` alone uses the provider's default model);
 - ``"http(s)://host:port/v1"`` or ``"http(s)://host:port/v1#MODEL"``: any OpenAI-compatible
-  server (model from ``#MODEL``, else the ``model`` option, else "default").
+  server (model from ``#MODEL``, else the ``model`` option, else the one the server lists at
+  ``GET /v1/models``, else "default").
 
 Cloud providers need an API key (environment variable or config file); local servers do not.
 """
@@ -49,7 +50,7 @@ def make_judge(
     if spec.startswith(("http://", "https://")):
         url, _, model = spec.partition("#")
         options.pop("base_url", None)  # the spec is the URL
-        model = model or options.pop("model", None) or "default"
+        model = model or options.pop("model", None) or None  # None: GET /v1/models says
         options.pop("model", None)
         return MLLMJudge(model, base_url=url, cache=cache, budget=budget, **options)
     provider, _, model = spec.partition(":")

@@ -1,31 +1,31 @@
 """What model calls cost: USD per million input and output tokens, extendable by the user.
 
-Prices change; the built-in table holds list prices of a few well-known models at the time of
-writing and is a convenience, not a bill. A model that is not in the table costs 0 (and a note is
-logged once), so local models are free and an unknown cloud model is visibly unpriced.
+Prices change; the built-in table (:data:`intuitf.evaluator.profiles.PRICES`, with the date it
+was checked) holds list prices of current models and is a convenience, not a bill: ``[prices]``
+in the config file and the judge's ``price`` option override it, and a server that reports the
+price of each call (OpenRouter's ``usage.cost``) is believed over the table. A model that is not
+in the table costs 0 (and a note is logged once), so local models are free and an unknown cloud
+model is visibly unpriced; a money budget refuses such a model unless its price is given.
 """
 
 from __future__ import annotations
 
 import logging
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+
+from intuitf.evaluator.profiles import PRICES, base_name
 
 log = logging.getLogger(__name__)
 
 #: model → (USD per 1M input tokens, USD per 1M output tokens).
-DEFAULT_PRICES: dict[str, tuple[float, float]] = {
-    "gpt-4o": (2.50, 10.00),
-    "gpt-4o-mini": (0.15, 0.60),
-    "gpt-4.1": (2.00, 8.00),
-    "gpt-4.1-mini": (0.40, 1.60),
-    "gpt-4.1-nano": (0.10, 0.40),
-    "gemini-2.0-flash": (0.10, 0.40),
-    "gemini-2.0-flash-001": (0.10, 0.40),
-    "gemini-2.5-flash": (0.30, 2.50),
-    "gemini-2.5-pro": (1.25, 10.00),
-    "claude-sonnet-4": (3.00, 15.00),
-}
+DEFAULT_PRICES: dict[str, tuple[float, float]] = dict(PRICES)
+
+#: What may follow a priced name in a variant of the same model at the same price: a date
+#: ("-2024-08-06", "-0125", "-09-2025"), "-latest", "-preview..." or "-exp...". "-lite", "-mini"
+#: and the like are other models with other prices.
+_VARIANT = re.compile(r"^(\d{4}(-\d{2}-\d{2})?|\d{2}-\d{4}|\d{3,}|latest|(preview|exp)(-[\w-]*)?)$")
 
 
 @dataclass
@@ -46,13 +46,27 @@ class PriceTable:
         return out
 
     def lookup(self, model: str) -> tuple[float, float] | None:
-        """Prices for ``model``: exact name, then without "vendor/", then the longest prefix."""
-        for name in (model, model.rsplit("/", 1)[-1]):
+        """Prices for ``model``: exact name, then without "vendor/" (and ":variant"), then a
+        dated or preview variant of a priced name (``gpt-4o-2024-08-06`` costs as ``gpt-4o``;
+        ``gemini-2.5-flash-lite`` is not ``gemini-2.5-flash``)."""
+        for name in (model, model.rsplit("/", 1)[-1], base_name(model)):
             if name in self.prices:
                 return self.prices[name]
-        base = model.rsplit("/", 1)[-1]
-        best = max((k for k in self.prices if base.startswith(k + "-")), key=len, default=None)
+        base = base_name(model)
+        best = max(
+            (
+                k
+                for k in self.prices
+                if base.startswith(k + "-") and _VARIANT.match(base[len(k) + 1 :])
+            ),
+            key=len,
+            default=None,
+        )
         return self.prices[best] if best else None
+
+    def known(self, model: str) -> bool:
+        """Whether ``model`` has a price here."""
+        return self.lookup(model) is not None
 
     def cost(self, model: str, input_tokens: int, output_tokens: int) -> float:
         """USD for one call; 0 for a model without a price (noted once in the log)."""

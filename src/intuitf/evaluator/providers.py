@@ -18,6 +18,14 @@ command's ``--request-timeout`` / ``--answer-deadline`` take precedence)::
     [judge]
     request_timeout = 30   # seconds for one request
     answer_deadline = 60   # seconds for one answer, retries of failed requests included
+    max_output_tokens = 4096   # the answer's token budget (reasoning included); default by model
+    reasoning_effort = "low"   # for models that reason; "default" sends none
+    max_concurrency = 8        # requests in flight at most; default by provider
+
+and what models cost, over the built-in table (USD per million input and output tokens)::
+
+    [prices]
+    "gpt-5.4-mini" = [0.75, 4.50]
 """
 
 from __future__ import annotations
@@ -29,6 +37,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from intuitf.errors import JudgeError
+from intuitf.evaluator.profiles import DEFAULT_MODELS
 
 #: Sent to local servers that ignore keys (the SDK refuses to run without one).
 NO_KEY = "no-key-needed"
@@ -50,25 +59,27 @@ class ProviderPreset:
 PROVIDERS: dict[str, ProviderPreset] = {
     p.name: p
     for p in (
-        ProviderPreset("openai", "https://api.openai.com/v1", ("OPENAI_API_KEY",), "gpt-4o"),
+        ProviderPreset(
+            "openai", "https://api.openai.com/v1", ("OPENAI_API_KEY",), DEFAULT_MODELS["openai"]
+        ),
         ProviderPreset(
             "gemini",
             "https://generativelanguage.googleapis.com/v1beta/openai/",
             ("GEMINI_API_KEY", "GOOGLE_API_KEY"),
-            "gemini-2.0-flash",
+            DEFAULT_MODELS["gemini"],
         ),
         ProviderPreset(
             "ollama",
             "http://localhost:11434/v1",
             ("OLLAMA_API_KEY",),
-            "qwen2.5vl:7b",
+            DEFAULT_MODELS["ollama"],
             needs_key=False,
         ),
         ProviderPreset(
             "vllm",
             "http://localhost:8000/v1",
             ("VLLM_API_KEY",),
-            "Qwen/Qwen2.5-VL-7B-Instruct",
+            DEFAULT_MODELS["vllm"],
             needs_key=False,
         ),
         ProviderPreset(
@@ -79,7 +90,10 @@ PROVIDERS: dict[str, ProviderPreset] = {
             needs_key=False,
         ),
         ProviderPreset(
-            "openrouter", "https://openrouter.ai/api/v1", ("OPENROUTER_API_KEY",), "openai/gpt-4o"
+            "openrouter",
+            "https://openrouter.ai/api/v1",
+            ("OPENROUTER_API_KEY",),
+            DEFAULT_MODELS["openrouter"],
         ),
     )
 }
@@ -195,6 +209,51 @@ def judge_timeouts() -> tuple[float, float]:
             )
         out.append(float(value))
     return out[0], out[1]
+
+
+_JUDGE_SETTINGS = {"max_output_tokens": int, "reasoning_effort": str, "max_concurrency": int}
+
+
+def judge_settings() -> dict:
+    """The judge settings under ``[judge]`` in the config (only those given), checked."""
+    table = _read_config().get("judge", {})
+    table = table if isinstance(table, dict) else {}
+    out: dict = {}
+    for key, kind in _JUDGE_SETTINGS.items():
+        if key not in table:
+            continue
+        value = table[key]
+        ok = isinstance(value, kind) and not isinstance(value, bool)
+        if ok and kind is int and value < 1:
+            ok = False
+        if not ok:
+            raise JudgeError(
+                f"{key} under [judge] in the config file {config_path()} must be "
+                + ("a whole number of at least 1." if kind is int else 'a word such as "low".'),
+                "Fix it, or remove it to use the default.",
+            )
+        out[key] = value
+    return out
+
+
+def config_prices() -> dict[str, tuple[float, float]]:
+    """``[prices]`` in the config: model -> (USD per 1M input tokens, per 1M output tokens)."""
+    table = _read_config().get("prices", {})
+    out: dict[str, tuple[float, float]] = {}
+    for model, pair in (table if isinstance(table, dict) else {}).items():
+        if (
+            not isinstance(pair, list)
+            or len(pair) != 2
+            or not all(isinstance(x, int | float) and not isinstance(x, bool) for x in pair)
+            or min(pair) < 0
+        ):
+            raise JudgeError(
+                f"The price of {model!r} under [prices] in {config_path()} must be two numbers "
+                "of 0 or more: USD per million input tokens and per million output tokens.",
+                f'Write it as "{model}" = [0.75, 4.50].',
+            )
+        out[str(model)] = (float(pair[0]), float(pair[1]))
+    return out
 
 
 def _key_from_config(provider: str) -> str | None:

@@ -18,6 +18,15 @@ Realism knobs, all seeded: ``latency`` (seconds, fixed or a distribution), ``noi
 (probability of the wrong answer), ``position_bias`` (probability of preferring the first image
 regardless), and ``faults`` ({kind: rate}) among :data:`FAULT_KINDS`.
 
+**Personalities** (:data:`PERSONALITIES`, ``personality="..."``) make it behave like the servers
+people use, as their documentation and users' issues describe them: ``openai-reasoning`` (rejects
+``max_tokens`` and any temperature but the default, spends reasoning tokens inside the output
+budget), ``gemini-thinking`` (spends the budget on thoughts billed apart, rejects an empty
+assistant turn, allows few requests per window and puts its retry delay in the body, answers
+404 for retired models), ``ollama`` (one request at a time, several models served),
+``lmstudio`` (one slot, needs the loaded model's id) and ``vllm-one-image`` (one image per
+request). Every request body is kept, images shortened, in :attr:`FakeMLLMServer.requests_log`.
+
 Run it on its own with ``python -m intuitf.testing.fake_mllm --port 8000 --target image.png``;
 ``GET /stats`` returns what it saw (requests, answers, faults), the judge of what a run spent.
 """
@@ -61,6 +70,93 @@ FAULT_KINDS = (
     "refusal",  # a polite refusal
     "blind",  # "I cannot see the image"
 )
+
+
+@dataclass(frozen=True)
+class Personality:
+    """How a kind of server behaves beyond answering (see the module notes)."""
+
+    name: str
+    #: The models it serves (GET /v1/models); the first is the one it answers as.
+    models: tuple[str, ...] = ("default",)
+    #: Whether a request must name one of ``models`` (404 otherwise).
+    require_model: bool = False
+    #: Models that answer 404 "no longer available".
+    retired: tuple[str, ...] = ()
+    #: Parameters answered with 400 ``unsupported_parameter``.
+    reject_params: tuple[str, ...] = ()
+    #: Only the default temperature (1) is accepted.
+    default_temperature_only: bool = False
+    #: Temperature below 1 makes the answer loop until the budget is spent (Gemini 3's warning).
+    low_temperature_loops: bool = False
+    #: Reasoning tokens spent before answering, by ``reasoning_effort`` ("" when none is sent).
+    reasoning: tuple[tuple[str, int], ...] = ()
+    #: Reasoning counted only in ``total_tokens`` (Gemini's thoughts), not ``completion_tokens``.
+    reasoning_apart: bool = False
+    #: Reasoning efforts accepted (others: 400 ``unsupported_value``); empty: any.
+    efforts: tuple[str, ...] = ()
+    #: An assistant turn without content is rejected ("parts must not be empty").
+    reject_empty_parts: bool = False
+    #: Requests worked on at once (others wait their turn); None: no limit.
+    slots: int | None = None
+    #: At most this many requests per ``window`` seconds; more get 429.
+    rate: tuple[int, float] | None = None
+    #: The 429's delay is in the body (Gemini's ``retryDelay``), not in ``Retry-After``.
+    retry_in_body: bool = False
+    #: Error bodies as a one-item list (Gemini's OpenAI-compatible endpoint).
+    list_errors: bool = False
+    #: Images one request may carry (400 beyond that).
+    max_images: int | None = None
+    #: Seconds per answer.
+    latency: float = 0.0
+
+
+PERSONALITIES: dict[str, Personality] = {
+    p.name: p
+    for p in (
+        Personality(
+            "openai-reasoning",
+            models=("gpt-5.4-mini",),
+            require_model=True,
+            reject_params=("max_tokens",),
+            default_temperature_only=True,
+            reasoning=(("", 2500), ("minimal", 80), ("low", 600), ("medium", 2500), ("high", 6000)),
+            efforts=("minimal", "low", "medium", "high"),
+            latency=0.02,
+        ),
+        Personality(
+            "gemini-thinking",
+            models=("gemini-2.5-flash", "gemini-3-flash-preview"),
+            require_model=True,
+            retired=("gemini-2.0-flash", "gemini-1.5-flash"),
+            low_temperature_loops=True,
+            reasoning=(("", 3000), ("none", 0), ("low", 900), ("medium", 2000), ("high", 6000)),
+            reasoning_apart=True,
+            reject_empty_parts=True,
+            rate=(12, 1.5),
+            retry_in_body=True,
+            list_errors=True,
+            latency=0.02,
+        ),
+        Personality(
+            "ollama",
+            models=("llama3.2:3b", "qwen2.5vl:7b"),
+            require_model=True,
+            slots=1,
+            latency=0.1,
+        ),
+        Personality(
+            "lmstudio", models=("qwen2.5-vl-7b-instruct",), require_model=True, slots=1, latency=0.1
+        ),
+        Personality(
+            "vllm-one-image",
+            models=("Qwen/Qwen2.5-VL-7B-Instruct",),
+            require_model=True,
+            max_images=1,
+            latency=0.02,
+        ),
+    )
+}
 
 REFUSAL_TEXT = "I'm sorry, but I can't help with comparing these images."
 BLIND_TEXT = "I cannot see the image. It seems no image was attached; please upload it again."
@@ -122,6 +218,11 @@ class ServerStats:
     structured_requests: int = 0
     #: Requests that continue a conversation (an earlier answer and a follow-up message).
     follow_ups: int = 0
+    #: Requests answered with an error by the personality's rules, by reason.
+    rejected: dict[str, int] = field(default_factory=dict)
+    #: Reasoning tokens spent, and answers left empty because the budget went on reasoning.
+    reasoning_tokens: int = 0
+    empty_answers: int = 0
 
 
 def _small(img: np.ndarray) -> np.ndarray:
@@ -145,8 +246,11 @@ class FakeMLLMServer:
 
     ``with FakeMLLMServer(target=img) as srv: judge = MLLMJudge("default", base_url=srv.base_url)``.
     ``port=0`` picks a free port. ``structured=False`` makes it reject ``response_format`` with
-    HTTP 400, like servers without JSON-schema support. ``retry_after`` is the delay it asks for
-    with 429/503; ``hang_seconds`` how long a hang lasts.
+    HTTP 400, like servers without structured output; ``structured="json_object"`` takes JSON
+    mode but not a schema. ``retry_after`` is the delay it asks for with 429/503;
+    ``hang_seconds`` how long a hang lasts. ``personality`` (a name in :data:`PERSONALITIES` or a
+    :class:`Personality`) adds a real server's behaviour; its latency applies unless ``latency``
+    is given.
     """
 
     def __init__(
@@ -161,10 +265,11 @@ class FakeMLLMServer:
         seed: int = 0,
         port: int = 0,
         host: str = "127.0.0.1",
-        structured: bool = True,
+        structured: bool | str = True,
         retry_after: float = 0.05,
         hang_seconds: float = 30.0,
         model: str = "default",
+        personality: str | Personality | None = None,
     ) -> None:
         if score is None and target is None:
             raise ValueError("give a target image or a score function")
@@ -184,7 +289,20 @@ class FakeMLLMServer:
         self.structured = structured
         self.retry_after = float(retry_after)
         self.hang_seconds = float(hang_seconds)
-        self.model = model
+        if isinstance(personality, str):
+            if personality not in PERSONALITIES:
+                raise ValueError(
+                    f"unknown personality {personality!r}; known: {', '.join(PERSONALITIES)}"
+                )
+            personality = PERSONALITIES[personality]
+        self.personality: Personality = personality or Personality("plain", models=(model,))
+        if personality is not None and latency == 0.0:
+            self.latency = Latency.parse(self.personality.latency)
+        self.model = self.personality.models[-1] if personality is not None else model
+        #: Every request body, images shortened to their size (the first 200).
+        self.requests_log: list[dict] = []
+        self._slots: asyncio.Semaphore | None = None
+        self._window: list[float] = []
         self.stats = ServerStats()
         self._seen: dict[str, int] = {}
         self._lock = threading.Lock()
@@ -251,7 +369,10 @@ class FakeMLLMServer:
         async def models() -> dict:
             return {
                 "object": "list",
-                "data": [{"id": self.model, "object": "model", "owned_by": "intuitf"}],
+                "data": [
+                    {"id": m, "object": "model", "owned_by": "intuitf"}
+                    for m in self.personality.models
+                ],
             }
 
         @app.get("/stats")
@@ -264,19 +385,137 @@ class FakeMLLMServer:
         async def chat(request: Request) -> Any:
             body = await request.json()
             with self._lock:
+                if len(self.requests_log) < 200:
+                    self.requests_log.append(shorten_images(body))
                 if any(m.get("role") == "assistant" for m in body.get("messages", [])):
                     self.stats.follow_ups += 1
                 self.stats.requests += 1
                 self.stats.in_flight += 1
                 self.stats.max_in_flight = max(self.stats.max_in_flight, self.stats.in_flight)
             try:
-                status, payload, headers = await self._handle(body)
+                rule = self._rules(body)
+                if rule is not None:
+                    status, payload, headers = rule
+                elif self.personality.slots:
+                    if self._slots is None:
+                        self._slots = asyncio.Semaphore(self.personality.slots)
+                    async with self._slots:
+                        status, payload, headers = await self._handle(body)
+                else:
+                    status, payload, headers = await self._handle(body)
+                if status >= 400 and self.personality.list_errors:
+                    payload = [payload]  # type: ignore[assignment]
             finally:
                 with self._lock:
                     self.stats.in_flight -= 1
             return JSONResponse(payload, status_code=status, headers=headers)
 
         return app
+
+    def _reject(self, reason: str, status: int, message: str, code: str, param: str | None = None):
+        with self._lock:
+            self.stats.rejected[reason] = self.stats.rejected.get(reason, 0) + 1
+        err = _error(message, code)
+        err["error"]["param"] = param
+        return status, err, {}
+
+    def _rules(self, body: dict) -> tuple[int, dict, dict] | None:
+        """The personality's answer to a request it does not take, or None to answer it."""
+        p = self.personality
+        model = str(body.get("model", ""))
+        if model in p.retired:
+            return self._reject(
+                "retired",
+                404,
+                f"models/{model} is no longer available to new users. Please update your "
+                "code to use a newer model.",
+                "not_found",
+            )
+        if p.require_model and model not in p.models:
+            return self._reject(
+                "model", 404, f"The model `{model}` does not exist or is not loaded.", "not_found"
+            )
+        for param in p.reject_params:
+            if param in body:
+                return self._reject(
+                    param,
+                    400,
+                    f"Unsupported parameter: '{param}' is not supported with this model. Use "
+                    "'max_completion_tokens' instead.",
+                    "unsupported_parameter",
+                    param,
+                )
+        temp = body.get("temperature")
+        if p.default_temperature_only and temp is not None and float(temp) != 1.0:
+            return self._reject(
+                "temperature",
+                400,
+                f"Unsupported value: 'temperature' does not support {temp} with this model. "
+                "Only the default (1) value is supported.",
+                "unsupported_value",
+                "temperature",
+            )
+        effort = body.get("reasoning_effort")
+        if effort is not None and p.efforts and effort not in p.efforts:
+            listed = ", ".join(f"'{e}'" for e in p.efforts)
+            return self._reject(
+                "reasoning_effort",
+                400,
+                f"Unsupported value: '{effort}' is not supported with the '{model}' model. "
+                f"Supported values are: {listed}.",
+                "unsupported_value",
+                "reasoning_effort",
+            )
+        if p.reject_empty_parts:
+            for i, m in enumerate(body.get("messages", [])):
+                if m.get("role") == "assistant" and not m.get("content"):
+                    return self._reject(
+                        "empty parts",
+                        400,
+                        f"* GenerateContentRequest.contents[{i}].parts: contents.parts must not "
+                        "be empty.",
+                        "INVALID_ARGUMENT",
+                    )
+        if p.max_images is not None:
+            n = sum(
+                1
+                for m in body.get("messages", [])
+                if isinstance(m.get("content"), list)
+                for part in m["content"]
+                if isinstance(part, dict) and part.get("type") == "image_url"
+            )
+            if n > p.max_images:
+                return self._reject(
+                    "images",
+                    400,
+                    f"At most {p.max_images} image(s) may be provided in one request.",
+                    "BadRequestError",
+                )
+        if p.rate is not None:
+            count, window = p.rate
+            now = time.monotonic()
+            with self._lock:
+                self._window = [t for t in self._window if now - t < window]
+                if len(self._window) >= count:
+                    wait = window - (now - self._window[0])
+                    self.stats.rejected["rate"] = self.stats.rejected.get("rate", 0) + 1
+                    self.stats.faults["rate_limit"] = self.stats.faults.get("rate_limit", 0) + 1
+                    err = _error(
+                        "You exceeded your current quota, please check your plan and billing "
+                        "details.",
+                        "RESOURCE_EXHAUSTED",
+                    )
+                    if p.retry_in_body:
+                        err["error"]["details"] = [
+                            {
+                                "@type": "type.googleapis.com/google.rpc.RetryInfo",
+                                "retryDelay": f"{wait:.2f}s",
+                            }
+                        ]
+                        return 429, err, {}
+                    return 429, err, {"retry-after": f"{wait:.2f}"}
+                self._window.append(now)
+        return None
 
     def _rng_for(self, body: dict) -> random.Random:
         """A generator seeded by the request's content and how often it was seen before.
@@ -321,13 +560,21 @@ class FakeMLLMServer:
         if fault == "server_error":
             return 500, _error("fake internal error", "server_error"), {}
         wants_json = _wants_schema(body)
-        if wants_json:
-            if not self.structured:
-                return (
-                    400,
-                    _error("response_format json_schema is not supported", "invalid_request_error"),
-                    {},
+        json_mode = _wants_json_object(body)
+        if wants_json or json_mode:
+            if self.structured is False:
+                err = _error(
+                    "response_format is not supported by this server", "invalid_request_error"
                 )
+                err["error"]["param"] = "response_format"
+                return 400, err, {}
+            if wants_json and self.structured == "json_object":
+                err = _error(
+                    "response_format type json_schema is not supported; use json_object",
+                    "invalid_request_error",
+                )
+                err["error"]["param"] = "response_format"
+                return 400, err, {}
             with self._lock:
                 self.stats.structured_requests += 1
         try:
@@ -345,17 +592,32 @@ class FakeMLLMServer:
         else:
             choice = self._decide(first, second, u_bias, u_noise)
             content = _answer(
-                keys, choice, wants_json, "reference_description" in _schema_props(body)
+                keys,
+                choice,
+                wants_json or json_mode,
+                "reference_description" in _schema_props(body),
             )
             if fault == "truncated":
                 content = content[: max(1, len(content) // 2)]
         n_images = 2 + sum(1 for t in text_parts if t.startswith(("Reference", "Sketch", "Before")))
         tin = len(prompt) // 4 + 85 * n_images
         tout = max(1, len(content) // 4)
+        content, tout, thought, finish = self._reason(body, content, tout)
         with self._lock:
             self.stats.answered += 1
             self.stats.input_tokens += tin
-            self.stats.output_tokens += tout
+            self.stats.output_tokens += tout + thought
+            self.stats.reasoning_tokens += thought
+            self.stats.empty_answers += not content
+        p = self.personality
+        completion = tout if p.reasoning_apart else tout + thought
+        usage: dict[str, Any] = {
+            "prompt_tokens": tin,
+            "completion_tokens": completion,
+            "total_tokens": tin + tout + thought,
+        }
+        if thought and not p.reasoning_apart:
+            usage["completion_tokens_details"] = {"reasoning_tokens": thought}
         return (
             200,
             {
@@ -367,17 +629,32 @@ class FakeMLLMServer:
                     {
                         "index": 0,
                         "message": {"role": "assistant", "content": content},
-                        "finish_reason": "stop",
+                        "finish_reason": finish,
                     }
                 ],
-                "usage": {
-                    "prompt_tokens": tin,
-                    "completion_tokens": tout,
-                    "total_tokens": tin + tout,
-                },
+                "usage": usage,
             },
             {},
         )
+
+    def _reason(self, body: dict, content: str, tout: int) -> tuple[str, int, int, str]:
+        """(content, answer tokens, reasoning tokens, finish reason) under the output budget:
+        a reasoning model thinks first, and when the budget runs out the answer is empty."""
+        p = self.personality
+        budget = body.get("max_completion_tokens") or body.get("max_tokens")
+        temp = body.get("temperature")
+        model = str(body.get("model", ""))
+        if p.low_temperature_loops and temp is not None and float(temp) < 1.0:
+            if model.startswith("gemini-3") and budget:
+                loop = "The first image shows the bone; the first image shows the bone. "
+                text = (loop * (int(budget) // 12 + 1))[: int(budget) * 4]
+                return text, int(budget), 0, "length"
+        thought = dict(p.reasoning).get(str(body.get("reasoning_effort") or ""), 0)
+        if not p.reasoning:
+            thought = 0
+        if budget is not None and thought + tout > int(budget):
+            return "", 0, min(thought, int(budget)), "length"
+        return content, tout, thought, "stop"
 
     async def _hang(self) -> None:
         """Wait ``hang_seconds``, or until the server stops (so stopping it stays quiet)."""
@@ -432,6 +709,27 @@ def oracle_choice(
 
 def _error(message: str, kind: str) -> dict:
     return {"error": {"message": message, "type": kind, "code": kind}}
+
+
+def shorten_images(body: dict) -> dict:
+    """``body`` with each image's data URI replaced by its type and size (for logs, fixtures)."""
+
+    def short(value: Any) -> Any:
+        if isinstance(value, dict):
+            return {k: short(v) for k, v in value.items()}
+        if isinstance(value, list):
+            return [short(v) for v in value]
+        if isinstance(value, str) and value.startswith("data:") and ";base64," in value:
+            head, data = value.split(";base64,", 1)
+            return f"{head};base64,<{len(data) * 3 // 4} bytes>"
+        return value
+
+    return short(body)
+
+
+def _wants_json_object(body: dict) -> bool:
+    rf = body.get("response_format")
+    return isinstance(rf, dict) and rf.get("type") == "json_object"
 
 
 def _wants_schema(body: dict) -> bool:
@@ -538,6 +836,11 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--no-structured", action="store_true", help="reject response_format (HTTP 400)"
     )
+    parser.add_argument(
+        "--personality",
+        choices=sorted(PERSONALITIES),
+        help="behave like a real server (see the module notes)",
+    )
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
     faults = {}
@@ -585,6 +888,7 @@ def main(argv: list[str] | None = None) -> None:
         host=args.host,
         structured=not args.no_structured,
         retry_after=args.retry_after,
+        personality=args.personality,
     )
     server.start()
     print(f"fake multimodal model at {server.base_url} (Ctrl-C to stop)", flush=True)
