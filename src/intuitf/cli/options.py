@@ -38,11 +38,10 @@ if TYPE_CHECKING:
 
 _PANEL = "Volume options"
 
-#: The view every command uses unless told otherwise (render, optimize): a three-quarter view
-#: from the front, a little from above. A sketch drawn on an ``intuitf render`` picture is
-#: judged from the camera recorded in that picture, whatever these say.
-DEFAULT_AZIMUTH = 30.0
-DEFAULT_ELEVATION = 20.0
+#: The view every command uses unless told otherwise (render, optimize): the one default view
+#: of every front end (:mod:`intuitf.render.camera`). A sketch drawn on an ``intuitf render``
+#: picture is judged from the camera recorded in that picture, whatever these say.
+from intuitf.render.camera import DEFAULT_AZIMUTH, DEFAULT_ELEVATION  # noqa: E402,F401
 
 
 def choices(name: str, values: Iterable[str]) -> type[StrEnum]:

@@ -79,6 +79,15 @@ def register(app: typer.Typer) -> None:
                 "voxels per axis (faster views of large data).",
             ),  # fmt: skip
         ] = None,
+        device: Annotated[
+            str,
+            typer.Option(
+                "--device",
+                metavar="auto|cpu|cuda",
+                help="Where to render: cuda (an NVIDIA GPU), cpu, or auto (the GPU when "
+                "usable). New runs take it; a run's views render on the run's device.",
+            ),  # fmt: skip
+        ] = "auto",
     ) -> None:
         """Start the web app: watch runs, steer them, and pick, refine and export results."""
         from intuitf.web.app import create_app, make_server
@@ -100,6 +109,9 @@ def register(app: typer.Typer) -> None:
             port = port or free_port(host if host not in ("0.0.0.0", "::") else "127.0.0.1")
         except OSError as exc:
             raise IntuitfError(f"Cannot bind to {host}: {exc.strerror or exc}.") from None
+        from intuitf.render.device import select_device
+
+        select_device(device)  # a missing GPU is reported before the server starts
         token = new_token()
         app = create_app(
             runs,
@@ -110,6 +122,7 @@ def register(app: typer.Typer) -> None:
             allowed_hosts=allowed_hosts(host, port),
             max_upload_bytes=max_upload_mb * 1024 * 1024,
             max_dim=max_dim,
+            device=None if device == "auto" else device,
         )
         shown = "127.0.0.1" if host in ("0.0.0.0", "::", "localhost") else host
         shown = f"[{shown}]" if ":" in shown else shown

@@ -1,7 +1,8 @@
 """Which camera and picture size ``optimize`` judges from.
 
-Without a sketch: ``--azimuth`` / ``--elevation`` or the default view every command shares
-(:data:`~intuitf.cli.options.DEFAULT_AZIMUTH`, :data:`~intuitf.cli.options.DEFAULT_ELEVATION`).
+Without a sketch: ``--azimuth`` / ``--elevation``, or (neither given) the session's default
+judging camera, the same for every front end (:func:`intuitf.session.building.default_camera`;
+the run's spec then names no camera, so the session decides it with the volume in hand).
 
 With ``--sketch S --on BASE``: the strokes mean something only where they were drawn, so the
 judging camera is the one BASE was rendered with, read from the record every picture intuitf
@@ -24,20 +25,31 @@ DEFAULT_SIZE = 256
 
 @dataclass
 class JudgingView:
-    """The judging camera (``Camera.to_dict()``), picture size, and notes for the user."""
+    """The judging camera (``Camera.to_dict()``), picture size, and notes for the user.
+
+    ``default``: nothing chose the camera (no angle, no sketch), so the run leaves it to the
+    session (:func:`intuitf.session.building.default_camera`, which may choose per volume);
+    ``camera`` is then today's default view.
+    """
 
     camera: dict
     size: int
     notes: list[str] = field(default_factory=list)
+    default: bool = False
 
 
 def default_camera(azimuth: float | None = None, elevation: float | None = None) -> dict:
-    """The shared default view, with the angles given here in its place."""
+    """The session's default view, with the angles given here in its place."""
     from intuitf.render import Camera
+    from intuitf.session.building import default_camera as session_default
 
-    return Camera(
-        azimuth=vo.DEFAULT_AZIMUTH if azimuth is None else azimuth,
-        elevation=vo.DEFAULT_ELEVATION if elevation is None else elevation,
+    cam = Camera.from_dict(session_default())
+    return Camera.from_dict(
+        {
+            **cam.to_dict(),
+            "azimuth": cam.azimuth if azimuth is None else azimuth,
+            "elevation": cam.elevation if elevation is None else elevation,
+        }
     ).to_dict()
 
 
@@ -56,7 +68,8 @@ def judging_view(
     """The camera and size to judge from (see the module notes); IntuitfError when a sketch's
     base picture cannot say where its strokes are."""
     if sketch is None or on is None:
-        return JudgingView(default_camera(azimuth, elevation), size or DEFAULT_SIZE)
+        chosen = azimuth is None and elevation is None
+        return JudgingView(default_camera(azimuth, elevation), size or DEFAULT_SIZE, default=chosen)
 
     from intuitf.imageio import load_image, read_render_metadata
     from intuitf.render import Camera

@@ -31,6 +31,12 @@ from intuitf.errors import RenderError
 
 PROJECTIONS = ("perspective", "orthographic")
 
+#: The default view of every front end (degrees): a three-quarter view from the front, a
+#: little from above. ``Camera()`` itself looks straight on (0, 0); a run's default judging
+#: camera is :func:`intuitf.session.building.default_camera`, built from these.
+DEFAULT_AZIMUTH = 30.0
+DEFAULT_ELEVATION = 20.0
+
 
 @dataclass(frozen=True)
 class Camera:

@@ -46,7 +46,6 @@ machine without a GPU; ``benchmarks/render.py --device cuda`` is the measurement
 
 from __future__ import annotations
 
-import weakref
 from collections.abc import Sequence
 
 import numpy as np
@@ -56,39 +55,33 @@ from intuitf.render import cuda_kernels as ck
 from intuitf.render import kernels
 from intuitf.render.cache import CacheViews, feature_shares
 from intuitf.render.camera import Camera, ViewFrame
+from intuitf.render.context import RenderContext
 from intuitf.render.renderer import BLOCK_SIZE, EARLY_STOP, VolumeRenderer
 from intuitf.tf.gaussian import GaussianTF
-from intuitf.volume.volume import Volume
 
 #: Bytes of pictures one launch may produce on the GPU (larger populations are split).
 MAX_LAUNCH_OUTPUT = 1 << 30
 
 
-class _DeviceVolume:
-    """A volume's data, and its gradient once asked for, in GPU memory."""
+class DeviceVolume:
+    """A volume's data, and its gradient once asked for, in GPU memory (one per
+    :class:`~intuitf.render.context.RenderContext`, so every renderer of the volume shares it)."""
 
-    def __init__(self, volume: Volume) -> None:
-        self.data = cuda.to_device(volume.data)
+    def __init__(self, context: RenderContext) -> None:
+        self.context = context
+        self.data = cuda.to_device(context.data)
         self.grad = None
 
-    def gradient(self, renderer: VolumeRenderer):
+    def gradient(self):
         if self.grad is None:
-            g = renderer._grad
-            if g is None:  # computed here without keeping the 6-bytes-per-voxel host copy
-                g = np.empty(renderer.volume.data.shape + (3,), dtype=np.int16)
-                kernels.central_gradient(renderer.volume.data, g)
+            ctx = self.context
+            if ctx.has_gradient:
+                g = ctx.gradient()
+            else:  # computed here without keeping the 6-bytes-per-voxel host copy
+                g = np.empty(ctx.shape + (3,), dtype=np.int16)
+                kernels.central_gradient(ctx.data, g)
             self.grad = cuda.to_device(g)
         return self.grad
-
-
-_VOLUMES: weakref.WeakKeyDictionary[Volume, _DeviceVolume] = weakref.WeakKeyDictionary()
-
-
-def _device_volume(volume: Volume) -> _DeviceVolume:
-    dv = _VOLUMES.get(volume)
-    if dv is None:
-        dv = _VOLUMES[volume] = _DeviceVolume(volume)
-    return dv
 
 
 def _occupancy(alpha: np.ndarray) -> np.ndarray:
@@ -103,7 +96,7 @@ class CudaBackend:
 
     def __init__(self, renderer: VolumeRenderer) -> None:
         self.renderer = renderer
-        self.volume = _device_volume(renderer.volume)
+        self.volume = renderer.context.gpu_volume()
         w, h = renderer.width, renderer.height
         self.tiles_x = -(-w // ck.TILE_W)
         self.n_tiles = self.tiles_x * -(-h // ck.TILE_H)
@@ -120,7 +113,7 @@ class CudaBackend:
 
     # -- pieces ---------------------------------------------------------------------------
     def grad(self):
-        return self.volume.gradient(self.renderer) if self.renderer.shading else self._no_grad
+        return self.volume.gradient() if self.renderer.shading else self._no_grad
 
     def cam(self, frame: ViewFrame):
         return cuda.to_device(frame.packed().astype(np.float32))

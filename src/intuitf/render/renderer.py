@@ -10,6 +10,7 @@ import numpy as np
 from intuitf.errors import RenderError
 from intuitf.render import kernels
 from intuitf.render.camera import Camera, ViewFrame
+from intuitf.render.context import BLOCK_SIZE, RenderContext, render_context
 from intuitf.render.device import select_device
 from intuitf.tf.gaussian import GaussianTF
 from intuitf.volume.volume import Volume
@@ -19,10 +20,13 @@ from intuitf.volume.volume import Volume
 ALPHA_EPSILON = 1e-5
 #: Rays stop once their transmittance drops below this: what is lost stays under 1/255.
 EARLY_STOP = 1.0 / 255.0
-#: Block edge (cells) of the empty-space-skipping grid of the direct renderer.
-BLOCK_SIZE = 8
-
 MAX_IMAGE_SIDE = 4096
+#: Pictures up to this many pixels are composited over the background with NumPy: the same
+#: bytes as the parallel kernel, without a kernel launch that on a busy machine waits for an
+#: OpenMP thread to be scheduled (about 10 ms a frame under load, for little work).
+NUMPY_COMPOSITE_PIXELS = 512 * 512
+
+__all__ = ["BLOCK_SIZE", "VolumeRenderer"]
 
 
 def _parse_size(size: int | Sequence[int]) -> tuple[int, int]:
@@ -67,7 +71,13 @@ class VolumeRenderer:
 
     ``device`` is ``"auto"`` (an NVIDIA GPU when one is usable, else the CPU), ``"cpu"`` or
     ``"cuda"`` (the GPU or a :class:`RenderError` saying why not); :attr:`device` is the one
-    chosen. Both give the same pictures (see :mod:`intuitf.render.cuda_backend`).
+    chosen. Both give the same pictures (see :mod:`intuitf.render.cuda_backend`). Left out
+    (None), the renderer runs on its volume's device (:attr:`context`'s).
+
+    What rendering the volume needs once (the gradient, the empty-space block ranges, the GPU
+    copies) lives in the volume's :class:`~intuitf.render.context.RenderContext`, shared by
+    every renderer of that volume; a renderer itself holds only its picture settings, so making
+    one per picture size or view costs nothing.
     """
 
     def __init__(
@@ -82,7 +92,7 @@ class VolumeRenderer:
         diffuse: float = 0.7,
         specular: float = 0.25,
         shininess: float = 24.0,
-        device: str = "auto",
+        device: str | None = None,
     ) -> None:
         if min(volume.dims) < 2:
             raise RenderError(
@@ -108,10 +118,10 @@ class VolumeRenderer:
         sp = np.asarray(volume.spacing, dtype=np.float64)
         self._spacing = sp / sp.min()
         self._extent = tuple((np.asarray(volume.dims) - 1) * self._spacing)
-        self._grad: np.ndarray | None = None
-        self._blocks: tuple[np.ndarray, np.ndarray] | None = None
+        #: The volume's shared rendering data (gradient, block ranges, device choice).
+        self.context: RenderContext = render_context(volume)
         #: ``"cpu"`` or ``"cuda"``: where this renderer's kernels run.
-        self.device = select_device(device)
+        self.device = select_device(device) if device is not None else self.context.device
         self._cuda = None
 
     # -- shared pieces --------------------------------------------------------------------
@@ -137,29 +147,15 @@ class VolumeRenderer:
         return np.ascontiguousarray(table, dtype=np.float32)
 
     def gradient(self) -> np.ndarray:
-        """Precomputed int16 central-difference gradient (z, y, x, 3), built on first use."""
-        if self._grad is None:
-            g = np.empty(self.volume.data.shape + (3,), dtype=np.int16)
-            kernels.central_gradient(self.volume.data, g)
-            self._grad = g
-        return self._grad
+        """Int16 central-difference gradient (z, y, x, 3) of the volume (its context's)."""
+        return self.context.gradient()
 
     def _shading_grad(self) -> np.ndarray:
         return self.gradient() if self.shading else np.zeros((1, 1, 1, 3), dtype=np.int16)
 
     def _block_ranges(self) -> tuple[np.ndarray, np.ndarray]:
         """LUT index range (lo, hi) each empty-space block's samples can take."""
-        if self._blocks is None:
-            nz, ny, nx = self.volume.data.shape
-            shape = tuple(max(1, -(-(n - 1) // BLOCK_SIZE)) for n in (nz, ny, nx))
-            bmin = np.empty(shape, dtype=np.float32)
-            bmax = np.empty(shape, dtype=np.float32)
-            kernels.block_minmax(self.volume.data, BLOCK_SIZE, bmin, bmax)
-            scale = self.lut_size - 1
-            lo = np.clip(np.floor(bmin * scale), 0, scale).astype(np.int64)
-            hi = np.clip(np.ceil(bmax * scale), 0, scale).astype(np.int64)
-            self._blocks = (lo, hi)
-        return self._blocks
+        return self.context.block_ranges(self.lut_size)
 
     def _cuda_backend(self):
         """The GPU state (device arrays, launch geometry), made on first use."""
@@ -172,6 +168,11 @@ class VolumeRenderer:
     def to_rgb8(self, rgba: np.ndarray) -> np.ndarray:
         """Composite premultiplied RGBA (H, W, 4) over the background: uint8 (H, W, 3)."""
         h, w = rgba.shape[:2]
+        if h * w <= NUMPY_COMPOSITE_PIXELS:
+            # The kernel's arithmetic (float64, +0.5, clamp, truncate), so the same bytes.
+            a = rgba.astype(np.float64, copy=False)
+            v = (a[..., :3] + (1.0 - a[..., 3:4]) * self.background) * 255.0 + 0.5
+            return np.clip(v, 0.0, 255.0).astype(np.uint8)
         out = np.empty((h * w, 3), dtype=np.uint8)
         kernels.to_rgb8(np.ascontiguousarray(rgba.reshape(h * w, 4)), self.background, out)
         return out.reshape(h, w, 3)

@@ -1,5 +1,12 @@
-"""Building a run's parts from its spec: the judge with its verdict store and budget, the
-intent with its pictures, and the spec of a run folder written before specs existed.
+"""Building a run's parts from its spec: the judging camera, the judge with its verdict store
+and budget, the intent with its pictures, and the spec of a run folder written before specs
+existed.
+
+The judging camera of a new run whose spec names none is decided here, once for every front
+end (CLI, web, batch, agents, Python API): :func:`judging_camera` applies the sketch rule (a
+sketch over a base picture is judged from the camera that picture was rendered with) and
+otherwise :func:`default_camera`. The camera chosen is written into the run's settings, so a
+resumed run keeps it whatever the default becomes.
 
 Every front end gets these from :meth:`Session.open` / :meth:`Session.resume`; none builds a
 judge or reopens a volume itself.
@@ -13,9 +20,49 @@ from typing import Any
 
 from intuitf.errors import IntuitfError, SessionError
 from intuitf.evaluator.types import Intent
+from intuitf.render.camera import DEFAULT_AZIMUTH, DEFAULT_ELEVATION
 from intuitf.session.spec import IntentSpec, JudgeSpec, RunSpec, parse_spec
 
 INTENT_PICTURES = ("reference", "sketch", "base")
+
+
+def default_camera(volume: Any = None, spec: RunSpec | None = None) -> dict:
+    """The camera (``Camera.to_dict()``) a new run judges from when nothing chooses one.
+
+    The one place that decides it for every front end; ``volume`` and ``spec`` are there for a
+    choice per volume or per intent (today the same view for all).
+    """
+    from intuitf.render import Camera
+
+    return Camera(azimuth=DEFAULT_AZIMUTH, elevation=DEFAULT_ELEVATION).to_dict()
+
+
+def picture_camera(path: str | Path) -> dict | None:
+    """The camera a picture intuitf wrote was rendered with (None when it carries no record)."""
+    from intuitf.imageio import read_render_metadata
+    from intuitf.render import Camera
+
+    record = read_render_metadata(Path(path))
+    if not record or not isinstance(record.get("camera"), dict):
+        return None
+    return Camera.from_dict(record["camera"]).to_dict()
+
+
+def judging_camera(spec: RunSpec, volume: Any = None, root: Path | None = None) -> dict:
+    """The camera a new run of ``spec`` judges from: the spec's own; else, for a sketch drawn
+    on a base picture that records its camera, that camera (the strokes mean something only
+    where they were drawn); else :func:`default_camera`. ``root`` resolves relative paths."""
+    if spec.settings.get("camera"):
+        return dict(spec.settings["camera"])
+    base = spec.intent.base if spec.intent.kind == "sketch" else None
+    if base:
+        p = Path(base)
+        if root is not None and not p.is_absolute():
+            p = root / p
+        cam = picture_camera(p) if p.is_file() else None
+        if cam is not None:
+            return cam
+    return default_camera(volume, spec)
 
 
 def build_judge(spec: JudgeSpec, run_dir: Path | None, protocol: str = "efficient"):

@@ -52,7 +52,12 @@ class SessionOpening:
         budget), the intent (its pictures copied into the run folder) and the Explorer. A
         ``judge`` or ``volume`` given here is used instead of building one (tests, notebooks).
         """
-        from intuitf.session.building import build_judge, copy_intent_pictures, load_intent
+        from intuitf.session.building import (
+            build_judge,
+            copy_intent_pictures,
+            judging_camera,
+            load_intent,
+        )
         from intuitf.session.lock import RunLock
 
         spec = parse_spec(spec)
@@ -75,6 +80,11 @@ class SessionOpening:
             vol = volume if volume is not None else spec.volume.load()
             if rd is not None:
                 spec = copy_intent_pictures(spec, rd.root)
+            if not settings.camera:  # decided once here, and recorded with the run
+                settings.camera = judging_camera(spec, vol, rd.root if rd is not None else None)
+                spec = spec.model_copy(
+                    update={"settings": {**spec.settings, "camera": settings.camera}}
+                )
             intent = load_intent(spec.intent, rd.root if rd is not None else None)
             initial = [GaussianTF.from_dict(d) for d in spec.initial]
             if judge is None:
@@ -115,7 +125,7 @@ class SessionOpening:
     ) -> Session:
         """Start a new run from in-memory objects. ``initial`` TFs join the first population."""
         intent = intent or Intent()
-        settings = settings or RunSettings()
+        settings = _with_default_camera(settings or RunSettings(), volume, spec)
         settings.validate()
         rd, lock = _locked(run_dir)
         try:
@@ -221,9 +231,9 @@ class SessionOpening:
         )
         rd, lock = _locked(run_dir)
         try:
+            settings = _with_default_camera(settings or RunSettings(), volume, None)
             return cls._refine_from(
-                volume, tf, intent, judge or _metric_judge(), settings or RunSettings(), rd, None,
-                overwrite, lock,
+                volume, tf, intent, judge or _metric_judge(), settings, rd, None, overwrite, lock,
             )  # fmt: skip
         except BaseException:
             if lock is not None:
@@ -528,6 +538,18 @@ def _locked(run_dir) -> tuple[RunDirectory | None, Any]:
     rd = RunDirectory(run_dir)
     rd.root.mkdir(parents=True, exist_ok=True)
     return rd, RunLock(rd.root).acquire()
+
+
+def _with_default_camera(settings: RunSettings, volume, spec) -> RunSettings:
+    """``settings`` with the default judging camera filled in when they name none (a copy:
+    the caller's object is left as it was)."""
+    if settings.camera:
+        return settings
+    from dataclasses import replace
+
+    from intuitf.session.building import default_camera
+
+    return replace(settings, camera=default_camera(volume, spec))
 
 
 def _metric_judge():

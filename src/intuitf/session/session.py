@@ -123,6 +123,7 @@ class Session(SessionOpening, SessionInteraction):
         lock: Any = None,
     ) -> None:
         from intuitf.render import Camera, VolumeRenderer
+        from intuitf.render.context import render_context
         from intuitf.session.views import ViewRenderer
 
         self.volume = volume
@@ -159,6 +160,9 @@ class Session(SessionOpening, SessionInteraction):
         self._judged_stage = stage_index
         self.queries = int(queries)
         self.camera = Camera.from_dict(settings.camera) if settings.camera else Camera()
+        # The run's device becomes its volume's (unless something named one first), so the
+        # views, picks and previews of this run render where its generations do.
+        render_context(volume, settings.device)
         self.renderer = VolumeRenderer(
             volume,
             size=settings.image_size,
@@ -205,6 +209,12 @@ class Session(SessionOpening, SessionInteraction):
     @property
     def status(self) -> str:
         return self._status
+
+    @property
+    def views(self):
+        """The :class:`~intuitf.session.views.ViewRenderer` of this run's interactive views
+        (own camera and size, on the run's device and background)."""
+        return self._views
 
     @property
     def judge_name(self) -> str:

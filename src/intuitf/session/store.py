@@ -329,6 +329,7 @@ class RunStore:
             size=size or settings.image_size,
             shading=settings.shading,
             background=tuple(settings.background),
+            device=settings.device,
         )
         return r.render(info.tf, camera)
 

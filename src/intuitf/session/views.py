@@ -3,7 +3,9 @@
 These run with their own camera and size, apart from the judging camera, so looking at a
 result never changes what the tournament sees. The :class:`ViewRenderer` keeps one renderer per
 (size, shading) and the sample cache of the last camera it was asked about, so a click and
-the decomposition that follows it share one pass through the volume.
+the decomposition that follows it share one pass through the volume. Its renderers take the
+volume's gradient and block ranges from the volume's render context, so a view size costs only
+its pictures.
 """
 
 from __future__ import annotations
@@ -35,9 +37,12 @@ class PickResult:
 
 
 class ViewRenderer:
-    """Renders of one volume for interaction, cached per size, shading and camera."""
+    """Renders of one volume for interaction, cached per size, shading and camera.
 
-    def __init__(self, volume, background=(0.0, 0.0, 0.0), device: str = "auto") -> None:
+    ``device`` None renders on the volume's device (its render context's).
+    """
+
+    def __init__(self, volume, background=(0.0, 0.0, 0.0), device: str | None = None) -> None:
         self.volume = volume
         self.background = tuple(background)
         self.device = device

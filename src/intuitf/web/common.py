@@ -78,9 +78,38 @@ def camera_of(d: Any):
     if ortho is not None:
         d["projection"] = "orthographic" if ortho else "perspective"
     try:
-        return Camera.from_dict(d)
+        camera = Camera.from_dict(d)
     except IntuitfError as exc:
         raise user_error(exc) from None
+    check_camera(camera)
+    return camera
+
+
+#: Zoom a view may ask for (the page's wheel keeps within 0.25..8).
+ZOOM_RANGE = (0.01, 100.0)
+#: Pan, in view widths either way.
+PAN_LIMIT = 10.0
+
+
+def check_camera(camera) -> None:
+    """422 for a camera no view can show: angles or pan that are not finite or far outside
+    the picture, a zoom outside :data:`ZOOM_RANGE`."""
+    values = [camera.azimuth, camera.elevation, camera.roll, camera.zoom, camera.fov, *camera.pan]
+    if not all(np.isfinite(float(v)) for v in values):
+        raise ApiError(422, "A camera's numbers must be finite.", "Send ordinary numbers.")
+    lo, hi = ZOOM_RANGE
+    if not lo <= camera.zoom <= hi:
+        raise ApiError(
+            422,
+            f"Camera zoom must be within {lo:g}..{hi:g}, got {camera.zoom:g}.",
+            "Zoom 1 fits the volume.",
+        )
+    if any(abs(float(p)) > PAN_LIMIT for p in camera.pan):
+        raise ApiError(
+            422,
+            f"Camera pan must be within ±{PAN_LIMIT:g} view widths.",
+            "Pan 0 centres the volume.",
+        )
 
 
 def check_size(size: int) -> int:
@@ -126,18 +155,9 @@ def tf_of(d: Any):
 
 
 def render_rgb8(renderer, tf, camera) -> np.ndarray:
-    """``renderer.render(tf, camera)``, composited over the background with NumPy on the CPU.
-
-    The same picture; it saves the parallel kernel launch of the compositing step, which on a
-    busy machine waits for an OpenMP thread to be scheduled (about 10 ms a frame under load,
-    for a few thousand pixels of work).
-    """
-    if getattr(renderer, "device", "cpu") != "cpu":
-        return renderer.render(tf, camera)
-    rgba = renderer.render_rgba(tf, camera)
-    bg = np.asarray(renderer.background, dtype=np.float32)
-    rgb = (rgba[..., :3] + (1.0 - rgba[..., 3:4]) * bg) * 255.0 + 0.5
-    return np.clip(rgb, 0.0, 255.0).astype(np.uint8)
+    """``renderer.render(tf, camera)`` (kept for the routes that call it: the renderer itself
+    composites small pictures with NumPy now, see ``VolumeRenderer.to_rgb8``)."""
+    return renderer.render(tf, camera)
 
 
 def encode_png(image: np.ndarray) -> bytes:
