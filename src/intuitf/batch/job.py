@@ -128,6 +128,7 @@ class BatchJob:
             )
         if not req.volumes:
             raise IntuitfError("Give the VOLUMES to process (files, folders or globs).")
+        _validate_template(_template(req, self.root))  # bad settings: nothing written yet
         self.lock.acquire()
         try:
             self._prepare(existing)

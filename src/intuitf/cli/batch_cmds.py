@@ -15,6 +15,7 @@ from typer.core import TyperCommand
 
 from intuitf.batch.runner import DEFAULT_MAX_FAILURES, DEFAULT_RAY_TIMEOUT
 from intuitf.cli import options as vo
+from intuitf.cli.spec_flags import flag_errors
 from intuitf.errors import IntuitfError
 
 console = Console()
@@ -339,7 +340,9 @@ def register(app: typer.Typer) -> None:
                 carry=carry,
                 **common,
             )
-        with BatchJob(req) as job:
+        with flag_errors():
+            job = BatchJob(req)
+        with job:
             for note in job.reference.notes:
                 console.print(f"[yellow]note:[/] {escape(note)}")
             if getattr(job, "lost", 0):

@@ -9,7 +9,7 @@ import typer
 from rich.console import Console
 
 from intuitf.cli.options import choices
-from intuitf.errors import TransferFunctionError
+from intuitf.errors import IntuitfError, TransferFunctionError
 from intuitf.tf.export import EXPORT_FORMATS
 
 console = Console()
@@ -87,6 +87,13 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Build RUN_DIR/report.html, a self-contained page with the run's results."""
         from intuitf.report import build_report
+        from intuitf.session.rundir import RunDirectory
 
+        if not RunDirectory(run_dir).exists():
+            what = "does not exist" if not run_dir.exists() else "holds no run (no run.json)"
+            raise IntuitfError(
+                f"{run_dir} {what}.",
+                "Give a run folder written by `intuitf optimize` (or a batch's runs/KEY).",
+            )
         path = build_report(run_dir)
         console.print(f"Report: {path}")

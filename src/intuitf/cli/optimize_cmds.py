@@ -11,7 +11,9 @@ from rich.markup import escape
 from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from intuitf.cli import judge_options as jo
 from intuitf.cli import options as vo
+from intuitf.cli.spec_flags import flag_errors
 from intuitf.cli.views import default_camera, judging_view
 from intuitf.errors import IntuitfError
 from intuitf.tf import load_tf
@@ -38,8 +40,8 @@ def _intent_spec(text, image, sketch, on, about) -> dict:
     return {"kind": "none", "about": about}
 
 
-def _judge_spec(evaluator, base_url, budget_usd, budget_calls, timeouts) -> dict:
-    options = {}
+def _judge_spec(evaluator, base_url, budget_usd, budget_calls, timeouts, judged=None) -> dict:
+    options = dict(judged or {})
     if timeouts.get("request_timeout") is not None:
         options["timeout"] = timeouts["request_timeout"]
     if timeouts.get("answer_deadline") is not None:
@@ -210,6 +212,11 @@ def register(app: typer.Typer) -> None:
             min=0.001,
             help="Seconds to get one answer, retries included (default 60, or the config).",
         ),
+        max_concurrency: jo.MaxConcurrencyOpt = None,
+        max_output_tokens: jo.MaxOutputTokensOpt = None,
+        reasoning_effort: jo.ReasoningEffortOpt = None,
+        price: jo.PriceOpt = None,
+        unpriced: jo.UnpricedOpt = False,
         seed: int = typer.Option(0, "--seed"),
         explorer: vo.ExplorerOpt = "ga",
         protocol: vo.ProtocolOpt = "efficient",
@@ -276,9 +283,13 @@ def register(app: typer.Typer) -> None:
         """Find transfer functions that match what you want, unattended."""
 
         from intuitf.session import Session
+        from intuitf.session.spec import parse_spec
 
         started = time.perf_counter()
         timeouts = dict(request_timeout=request_timeout, answer_deadline=answer_deadline)
+        judged = jo.judge_options(
+            max_concurrency, max_output_tokens, reasoning_effort, price, unpriced
+        )
         if resume is not None:
             session = Session.resume(
                 resume,
@@ -286,7 +297,7 @@ def register(app: typer.Typer) -> None:
                 base_url=base_url,
                 budget_usd=budget_usd,
                 budget_calls=budget_calls,
-                judge_options=_timeout_options(timeouts),
+                judge_options={**_timeout_options(timeouts), **judged},
             )
             _print_lock_note(session)
             if session.judge_moved:
@@ -299,6 +310,10 @@ def register(app: typer.Typer) -> None:
         else:
             if volume is None:
                 raise IntuitfError("Give a VOLUME to optimize (or 'phantom'), or --resume RUN_DIR.")
+            if text is not None and not text.strip():
+                raise IntuitfError(
+                    "--text is empty.", "Say what you want in words, or leave --text out."
+                )
             from intuitf.render.device import select_device
 
             select_device(device)  # a missing GPU is reported before any work
@@ -310,7 +325,8 @@ def register(app: typer.Typer) -> None:
             settings = dict(
                 population=population, generations=generations, n_gaussians=gaussians, seed=seed,
                 explorer=str(explorer), protocol=str(protocol), image_size=view.size,
-                output_size=output_size, top_k=top, shading=shading, camera=view.camera,
+                output_size=output_size, top_k=top, shading=shading,
+                camera={} if view.default else view.camera,
                 palette_hint=palette, material_hints=hints, device=device,
             )  # fmt: skip
             intent = _intent_spec(text, image, sketch, on, about)
@@ -322,14 +338,26 @@ def register(app: typer.Typer) -> None:
             spec = {
                 "volume": volume_spec,
                 "intent": intent,
-                "judge": _judge_spec(evaluator, base_url, budget_usd, budget_calls, timeouts),
+                "judge": _judge_spec(
+                    evaluator, base_url, budget_usd, budget_calls, timeouts, judged
+                ),
                 "settings": settings,
                 "initial": initial,
             }
             run_dir = output or Path("runs") / (
                 f"{_volume_name(volume)}-{time.strftime('%Y%m%d-%H%M%S')}"
             )
-            session = Session.open(spec, run_dir, overwrite=overwrite)
+            with flag_errors():
+                parse_spec(spec)  # every bad option named before anything is written
+            _check_can_create(run_dir)
+            with flag_errors():
+                try:
+                    session = Session.open(spec, run_dir, overwrite=overwrite)
+                except OSError as exc:  # a folder that cannot be made, a disk that is full
+                    raise IntuitfError(
+                        f"Cannot write the run folder {run_dir}: {exc.strerror or exc}.",
+                        "Choose a folder you can write to with -o.",
+                    ) from None
             for note in session.volume.notes:
                 console.print(f"[yellow]note:[/] {escape(note)}")
             _print_lock_note(session)
@@ -374,6 +402,26 @@ def register(app: typer.Typer) -> None:
             console.print(
                 f"Open {outcome.run_dir / 'report.html'} in a browser to see the results."
             )
+
+
+def _check_can_create(folder: Path) -> None:
+    """Say so before any work when ``folder`` cannot be made: its nearest existing parent is
+    a file, or a folder this user cannot write to."""
+    import os
+
+    p = Path(folder).expanduser().absolute()
+    while not p.exists() and p != p.parent:
+        p = p.parent
+    if not p.is_dir():
+        raise IntuitfError(
+            f"Cannot make the run folder {folder}: {p} is a file.",
+            "Choose another folder with -o.",
+        )
+    if not os.access(p, os.W_OK | os.X_OK):
+        raise IntuitfError(
+            f"Cannot make the run folder {folder}: {p} is not writable.",
+            "Choose a folder you can write to with -o.",
+        )
 
 
 def _volume_name(source: str) -> str:

@@ -18,18 +18,179 @@ them into the run folder (``intent/``) and the spec written there points at the 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    StrictBool,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from intuitf.errors import SessionError
+from intuitf.explorer.methods import METHODS
 
 #: Bumped when a spec written by an older intuitf needs converting to be read.
 SPEC_VERSION = 1
 
+#: The stages a run's plan may name.
+STAGES = ("initialize", "customize", "refine")
+
 
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid")
+
+
+class SpecProblems(ValueError):
+    """Several bad fields at once: (dotted field path, what is wrong) pairs.
+
+    Raised inside a validator, it reaches :func:`parse_spec` through pydantic's error context,
+    which reports every pair (a validator's plain ValueError would name only the field).
+    """
+
+    def __init__(self, problems: list[tuple[str, str]]) -> None:
+        super().__init__("; ".join(f"{path}: {msg}" for path, msg in problems))
+        self.problems = problems
+
+
+_Unit = Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)]
+_Positive = Annotated[int, Field(ge=1)]
+
+
+class SettingsSchema(BaseModel):
+    """The type, range or choices of every :class:`RunSettings` field, checked before a run
+    folder is written. Only the fields a spec gives are checked; the rest keep their defaults.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    population: int = Field(32, ge=4, le=1000)
+    generations: int = Field(12, ge=1, le=10_000)
+    n_gaussians: int = Field(5, ge=1, le=16)
+    seed: int = Field(0, ge=0, le=2**63 - 1)
+    explorer: Literal[METHODS] = "ga"  # type: ignore[valid-type]
+    protocol: Literal["efficient", "paper"] = "efficient"
+    image_size: int = Field(256, ge=32, le=2048)
+    output_size: int = Field(512, ge=32, le=4096)
+    shading: StrictBool = True
+    background: tuple[_Unit, _Unit, _Unit] = (0.0, 0.0, 0.0)
+    camera: dict[str, Any] = Field(default_factory=dict)
+    top_k: int = Field(4, ge=1, le=1000)
+    init_share: float = Field(0.34, ge=0.0, le=1.0, allow_inf_nan=False)
+    stages: list[tuple[Literal[STAGES], _Positive]] = Field(default_factory=list)  # type: ignore[valid-type]
+    palette_hint: StrictBool = True
+    device: Literal["auto", "cpu", "cuda"] = "auto"
+    material_hints: StrictBool = True
+
+    @field_validator("camera")
+    @classmethod
+    def _camera_valid(cls, v: dict[str, Any]) -> dict[str, Any]:
+        if v:
+            from intuitf.errors import RenderError
+            from intuitf.render.camera import Camera
+
+            try:
+                Camera.from_dict(v)
+            except RenderError as exc:
+                raise ValueError(exc.message) from None
+        return v
+
+
+def check_settings(settings: dict[str, Any]) -> dict[str, Any]:
+    """``settings`` checked field by field: the given fields, their values normalised (``"8"``
+    becomes 8); :class:`SpecProblems` naming every bad field (``settings.population``)."""
+    from intuitf.session.settings import RunSettings
+
+    problems: list[tuple[str, str]] = []
+    known = RunSettings.field_names()
+    for name in sorted(set(settings) - known):
+        problems.append(
+            (f"settings.{name}", f"unknown setting (known: {', '.join(sorted(known))})")
+        )
+    checked = {k: v for k, v in settings.items() if k in SettingsSchema.model_fields}
+    try:
+        model = SettingsSchema.model_validate(checked)
+    except ValidationError as exc:
+        for err in exc.errors():
+            path = ".".join(str(p) for p in err["loc"])
+            problems.append((f"settings.{path}", _plain(err["msg"])))
+        model = None
+    if problems:
+        raise SpecProblems(problems)
+    out = dict(settings)
+    dumped = model.model_dump(mode="json") if model is not None else {}
+    for k in checked:
+        out[k] = dumped[k]
+    return out
+
+
+def _plain(msg: str) -> str:
+    """pydantic's message without its "Value error, " prefix."""
+    return msg.removeprefix("Value error, ")
+
+
+#: Judge options whose values are checked here (others are checked by the judge itself).
+_JUDGE_OPTION_TYPES: dict[str, Any] = {
+    "swap": Literal["always", "never", "auto"],
+    "compose": Literal["parts", "side_by_side"],
+    "image_format": Literal["png", "jpeg"],
+    "jpeg_quality": Annotated[int, Field(ge=1, le=100)],
+    "max_concurrency": Annotated[int, Field(ge=1)],
+    "timeout": Annotated[float, Field(gt=0, allow_inf_nan=False)],
+    "deadline": Annotated[float, Field(gt=0, allow_inf_nan=False)],
+    "max_retries": Annotated[int, Field(ge=0)],
+    "answer_retries": Annotated[int, Field(ge=0)],
+    "temperature": Annotated[float, Field(ge=0, allow_inf_nan=False)],
+    "structured": StrictBool,
+    "max_tokens": Annotated[int, Field(ge=1)],
+    "backoff_base": Annotated[float, Field(ge=0, allow_inf_nan=False)],
+    "backoff_max": Annotated[float, Field(ge=0, allow_inf_nan=False)],
+    "model": str,
+    "name": str,
+    "api_key": str,
+    "provider": str,
+}
+
+
+def _judge_option_names() -> set[str]:
+    """What a model judge's constructor takes (as the factory passes ``options`` on)."""
+    import inspect
+
+    from intuitf.evaluator.mllm import MLLMJudge
+
+    params = inspect.signature(MLLMJudge.__init__).parameters
+    named = {n for n, p in params.items() if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)}
+    # Made by the session from the spec itself, never passed as options.
+    return (named - {"self", "cache", "budget", "prices", "base_url"}) | {"model"}
+
+
+def check_judge_options(options: dict[str, Any]) -> dict[str, Any]:
+    """Judge ``options`` checked: known names, and the values of those listed above."""
+    from pydantic import TypeAdapter
+
+    if not options:
+        return options
+    problems: list[tuple[str, str]] = []
+    known = _judge_option_names()
+    out = dict(options)
+    for name, value in options.items():
+        path = f"judge.options.{name}"
+        if name not in known:
+            problems.append((path, f"unknown judge option (known: {', '.join(sorted(known))})"))
+            continue
+        kind = _JUDGE_OPTION_TYPES.get(name)
+        if kind is None:
+            continue
+        try:
+            out[name] = TypeAdapter(kind).validate_python(value)
+        except ValidationError as exc:
+            problems += [(path, _plain(e["msg"])) for e in exc.errors()]
+    if problems:
+        raise SpecProblems(problems)
+    return out
 
 
 class VolumeSpec(_Model):
@@ -91,6 +252,11 @@ class JudgeSpec(_Model):
     budget_calls: int | None = Field(default=None, ge=0)
     options: dict[str, Any] = Field(default_factory=dict)
 
+    @field_validator("options")
+    @classmethod
+    def _options_valid(cls, v: dict[str, Any]) -> dict[str, Any]:
+        return check_judge_options(v)
+
     @property
     def is_model(self) -> bool:
         return self.spec != "metric"
@@ -140,10 +306,8 @@ class RunSpec(_Model):
     def _settings_valid(cls, v: dict[str, Any]) -> dict[str, Any]:
         from intuitf.session.settings import RunSettings
 
-        unknown = sorted(set(v) - RunSettings.field_names())
-        if unknown:
-            raise ValueError(f"unknown settings {unknown}")
-        try:
+        v = check_settings(v)
+        try:  # what the schema cannot say alone (RunSettings.validate has the last word)
             RunSettings.from_dict(v).validate()
         except SessionError as exc:
             raise ValueError(exc.message) from exc
@@ -178,18 +342,39 @@ class RunSpec(_Model):
         return parse_spec(data)
 
 
+class SpecError(SessionError):
+    """A run spec that is not valid; ``fields`` maps each bad field's dotted path (in the
+    words of the API: ``settings.population``, ``judge.options.timeout``) to what is wrong,
+    so a front end can name its own words for them (a flag, a form field)."""
+
+    def __init__(self, fields: dict[str, str], hint: str | None = None) -> None:
+        problems = "; ".join(f"{path}: {msg}" for path, msg in fields.items())
+        super().__init__(
+            f"The run spec is not valid: {problems}.",
+            hint or "Fix the fields named above (see intuitf.session.spec.RunSpec).",
+        )
+        self.fields = fields
+
+
+def spec_problems(exc: ValidationError) -> dict[str, str]:
+    """Every bad field of a failed RunSpec validation, by dotted path, in plain words."""
+    fields: dict[str, str] = {}
+    for err in exc.errors():
+        inner = (err.get("ctx") or {}).get("error")
+        base = ".".join(str(p) for p in err["loc"])
+        if isinstance(inner, SpecProblems):
+            for path, msg in inner.problems:
+                fields.setdefault(path, msg)
+            continue
+        fields.setdefault(base or "spec", _plain(err["msg"]))
+    return fields
+
+
 def parse_spec(data: Any) -> RunSpec:
-    """A :class:`RunSpec` from plain data, or :class:`SessionError` naming every problem."""
+    """A :class:`RunSpec` from plain data, or :class:`SpecError` naming every bad field."""
     if isinstance(data, RunSpec):
         return data
     try:
         return RunSpec.model_validate(data)
     except ValidationError as exc:
-        problems = "; ".join(
-            f"{'.'.join(str(p) for p in err['loc']) or 'spec'}: {err['msg']}"
-            for err in exc.errors()
-        )
-        raise SessionError(
-            f"The run spec is not valid: {problems}.",
-            "Fix the fields named above (see intuitf.session.spec.RunSpec).",
-        ) from None
+        raise SpecError(spec_problems(exc)) from None
