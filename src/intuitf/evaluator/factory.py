@@ -14,6 +14,8 @@ Cloud providers need an API key (environment variable or config file); local ser
 
 from __future__ import annotations
 
+import os
+from collections.abc import Callable
 from typing import Any
 
 from intuitf.errors import JudgeError
@@ -132,3 +134,28 @@ def record_judge_move(record: dict, spec: str, base_url: str | None, generation:
     history.append(entry)
     record.update(evaluator=new["evaluator"], base_url=new["base_url"], judges=history)
     return entry
+
+
+def note_adaptation(record: dict, note: dict) -> dict:
+    """Add to ``record`` (run.json's dict, changed in place) what the judge changed because its
+    server said so (``MLLMJudge.adaptations``); returns ``record``."""
+    entries = list(record.get("judge_adaptations") or [])
+    entries.append({k: redact_url(v) if isinstance(v, str) else v for k, v in note.items()})
+    record["judge_adaptations"] = entries
+    return record
+
+
+def adaptation_recorder(run_dir: str | os.PathLike | None) -> Callable[[dict], None] | None:
+    """A judge's ``on_adapt`` that records each adaptation in ``run_dir``'s run.json (None
+    without a run folder). A run.json not yet written is left alone (the note stays in the log)."""
+    if run_dir is None:
+        return None
+
+    def record(note: dict) -> None:
+        from intuitf.session.rundir import RunDirectory
+
+        rd = RunDirectory(run_dir)
+        if rd.run_json.exists():
+            rd.write_run(note_adaptation(rd.read_run(), note))
+
+    return record

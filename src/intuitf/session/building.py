@@ -94,11 +94,17 @@ def build_judge(spec: JudgeSpec, run_dir: Path | None, protocol: str = "efficien
             # requests a killed process had under way.
             budget.restore(cache.spent(), *cache.unsettled())
     try:
-        return make_judge(spec.spec, cache=cache, budget=budget, **options)
+        judge = make_judge(spec.spec, cache=cache, budget=budget, **options)
     except BaseException:
         if cache is not None:
             cache.close()
         raise
+    if hasattr(judge, "on_adapt") and judge.on_adapt is None:
+        from intuitf.evaluator.factory import adaptation_recorder
+
+        # What the judge changes because its server said so goes into run.json.
+        judge.on_adapt = adaptation_recorder(run_dir)
+    return judge
 
 
 def resumed_judge_spec(spec: JudgeSpec, evaluator: str | None, base_url: str | None):
