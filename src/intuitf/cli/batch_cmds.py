@@ -14,6 +14,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from typer.core import TyperCommand
 
 from intuitf.batch.runner import DEFAULT_MAX_FAILURES, DEFAULT_RAY_TIMEOUT
+from intuitf.cli import judge_options as jo
 from intuitf.cli import options as vo
 from intuitf.cli.spec_flags import flag_errors
 from intuitf.errors import IntuitfError
@@ -276,6 +277,10 @@ def register(app: typer.Typer) -> None:
         elevation: float = typer.Option(None, "--elevation"),
         request_timeout: float = typer.Option(None, "--request-timeout", min=0.001),
         answer_deadline: float = typer.Option(None, "--answer-deadline", min=0.001),
+        max_output_tokens: jo.MaxOutputTokensOpt = None,
+        reasoning_effort: jo.ReasoningEffortOpt = None,
+        price: jo.PriceOpt = None,
+        unpriced: jo.UnpricedOpt = False,
         shape: vo.ShapeOpt = None,
         dtype: vo.DtypeOpt = None,
         byte_order: vo.ByteOrderOpt = None,
@@ -293,7 +298,8 @@ def register(app: typer.Typer) -> None:
             from intuitf.batch.runner import import_ray
 
             import_ray()  # says how to install it, before anything else happens
-        judge_options = {}
+        # --max-concurrency is the whole batch's limit (the runner shares it out).
+        judge_options = jo.judge_options(None, max_output_tokens, reasoning_effort, price, unpriced)
         if request_timeout is not None:
             judge_options["timeout"] = request_timeout
         if answer_deadline is not None:

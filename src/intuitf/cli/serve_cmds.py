@@ -10,6 +10,7 @@ from typing import Annotated
 import typer
 from rich.console import Console
 
+from intuitf.cli import judge_options as jo
 from intuitf.errors import IntuitfError
 
 console = Console()
@@ -88,6 +89,11 @@ def register(app: typer.Typer) -> None:
                 "usable). New runs take it; a run's views render on the run's device.",
             ),  # fmt: skip
         ] = "auto",
+        max_concurrency: jo.MaxConcurrencyOpt = None,
+        max_output_tokens: jo.MaxOutputTokensOpt = None,
+        reasoning_effort: jo.ReasoningEffortOpt = None,
+        price: jo.PriceOpt = None,
+        unpriced: jo.UnpricedOpt = False,
     ) -> None:
         """Start the web app: watch runs, steer them, and pick, refine and export results."""
         from intuitf.web.app import create_app, make_server
@@ -112,6 +118,9 @@ def register(app: typer.Typer) -> None:
         from intuitf.render.device import select_device
 
         select_device(device)  # a missing GPU is reported before the server starts
+        judge_options = jo.judge_options(
+            max_concurrency, max_output_tokens, reasoning_effort, price, unpriced
+        )
         token = new_token()
         app = create_app(
             runs,
@@ -123,6 +132,7 @@ def register(app: typer.Typer) -> None:
             max_upload_bytes=max_upload_mb * 1024 * 1024,
             max_dim=max_dim,
             device=None if device == "auto" else device,
+            judge_options=judge_options,
         )
         shown = "127.0.0.1" if host in ("0.0.0.0", "::", "localhost") else host
         shown = f"[{shown}]" if ":" in shown else shown

@@ -87,8 +87,12 @@ class WebState:
         max_live_runs: int,
         drag_budget_ms: float | None = 40.0,
         device: str | None = None,
+        judge_options: dict | None = None,
     ) -> None:
         self.runs_dir = runs_dir
+        #: Options of new runs' model judges (``serve --max-concurrency`` ...), unless a run's
+        #: spec gives its own judge.
+        self.judge_options = dict(judge_options or {})
         #: Where views of volumes with no live run render (``serve --device``; None: each
         #: volume's own device, "auto" unless a run named one).
         self.device = device
@@ -297,6 +301,7 @@ def create_app(
     max_live_runs: int = 4,
     drag_budget_ms: float | None = 40.0,
     device: str | None = None,
+    judge_options: dict | None = None,
 ) -> FastAPI:
     """The intuitf web app over the runs folder ``runs_dir``.
 
@@ -309,6 +314,7 @@ def create_app(
     render time drag frames aim at (their side shrinks from 128 to 96 or 64 pixels on a slow
     machine; None keeps 128). ``device`` (auto, cpu or cuda) is where new runs and the views of
     volumes without a live run render (a run's views render on its own device).
+    ``judge_options`` go to the model judge of new runs that name no judge of their own.
     """
     from intuitf import __version__
     from intuitf.web import (
@@ -338,6 +344,7 @@ def create_app(
         sse_keepalive=float(sse_keepalive),
         max_live_runs=int(max_live_runs),
         drag_budget_ms=drag_budget_ms,
+        judge_options=judge_options,
         device=device,
     )
 

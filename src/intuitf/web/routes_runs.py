@@ -202,6 +202,8 @@ def _build_spec(web, body: RunIn):
     judge: Any = body.judge if body.judge is not None else web.evaluator
     if isinstance(judge, JudgeIn):
         judge = judge.model_dump()
+    elif isinstance(judge, str) and getattr(web, "judge_options", None):
+        judge = {"spec": judge, "options": dict(web.judge_options)}  # serve's judge options
     data = {
         "volume": entry.spec().model_dump(exclude_none=True),
         "intent": intent,
