@@ -81,6 +81,8 @@ export class GLVolumeRenderer {
     this.software = /swiftshader|llvmpipe|software|softpipe/i.test(this.gpu);
     this.max3d = gl.getParameter(gl.MAX_3D_TEXTURE_SIZE);
     this.floatTargets = !!gl.getExtension("EXT_color_buffer_float");
+    this.floatLinear = !!gl.getExtension("OES_texture_float_linear");
+    this.maxTexture = gl.getParameter(gl.MAX_TEXTURE_SIZE);
     this.render = this.render.bind(this);
     this.progRender = program(gl, VERTEX, RENDER);
     this.progAttr = null; // compiled on the first pick
@@ -107,6 +109,7 @@ export class GLVolumeRenderer {
    */
   async setVolume(vol, blocks) {
     const gl = this.gl;
+    if (vol.lutSize > this.maxTexture) throw new Error(`its ${vol.lutSize}-entry lookup table is wider than this browser's textures (${this.maxTexture})`);
     if (this.volTex) gl.deleteTexture(this.volTex);
     const tex = gl.createTexture();
     gl.bindTexture(gl.TEXTURE_3D, tex);
@@ -131,7 +134,11 @@ export class GLVolumeRenderer {
     ])
       gl.texParameteri(gl.TEXTURE_3D, k, v);
     this.volTex = tex;
-    // The block grid: one byte per block, rewritten for each TF.
+    // The block grid: one byte per block, rewritten for each TF (storage is immutable: a
+    // new texture per volume).
+    gl.deleteTexture(this.visTex);
+    this.visTex = gl.createTexture();
+    this.vis = null;
     gl.bindTexture(gl.TEXTURE_3D, this.visTex);
     gl.texStorage3D(gl.TEXTURE_3D, 1, gl.R8, blocks.nb[0], blocks.nb[1], blocks.nb[2]);
     for (const k of [gl.TEXTURE_MIN_FILTER, gl.TEXTURE_MAG_FILTER]) gl.texParameteri(gl.TEXTURE_3D, k, gl.NEAREST);
@@ -150,12 +157,13 @@ export class GLVolumeRenderer {
     const key = `${tfKey(tf)}|${n}|${sampleDistance}`;
     if (key === this.lutState.key) return this.lutState;
     const lut = tfLut(tf, n, sampleDistance);
-    const rows = Math.ceil(n / 256);
-    const padded = new Float32Array(256 * rows * 4);
-    padded.set(lut);
     gl.bindTexture(gl.TEXTURE_2D, this.lutTex);
-    gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, 256, rows, 0, gl.RGBA, gl.FLOAT, padded);
-    for (const k of [gl.TEXTURE_MIN_FILTER, gl.TEXTURE_MAG_FILTER]) gl.texParameteri(gl.TEXTURE_2D, k, gl.NEAREST);
+    // Linear filtering interpolates between entries as the server does; float32 where the
+    // browser filters it, else half floats (always filterable).
+    if (this.floatLinear) gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, n, 1, 0, gl.RGBA, gl.FLOAT, lut);
+    else gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA16F, n, 1, 0, gl.RGBA, gl.FLOAT, lut);
+    for (const k of [gl.TEXTURE_MIN_FILTER, gl.TEXTURE_MAG_FILTER]) gl.texParameteri(gl.TEXTURE_2D, k, gl.LINEAR);
+    for (const k of [gl.TEXTURE_WRAP_S, gl.TEXTURE_WRAP_T]) gl.texParameteri(gl.TEXTURE_2D, k, gl.CLAMP_TO_EDGE);
     const occ = occupancy(lut);
     this.vis = visibleBlocks(this.blocks, occ, this.vis);
     const nb = this.blocks.nb;
@@ -215,6 +223,7 @@ export class GLVolumeRenderer {
     gl.uniform4fv(u.u_shade, DEFAULTS.shade);
     gl.uniform1i(u.u_shading, shading ? 1 : 0);
     gl.uniform3f(u.u_bg, background[0], background[1], background[2]);
+    gl.uniform1i(u.u_alphaOut, 0);
     gl.bindFramebuffer(gl.FRAMEBUFFER, null);
     gl.viewport(0, 0, width, height);
     gl.drawArrays(gl.TRIANGLES, 0, 3);
@@ -223,6 +232,39 @@ export class GLVolumeRenderer {
       gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px); // waits for the frame
     }
     return performance.now() - t0;
+  }
+
+  /**
+   * Premultiplied RGBA bytes (rows top to bottom) of `tf` alone, not composited over a
+   * background: for pictures the page composites itself (the features strip's ghosts).
+   */
+  renderRGBA({ tf, camera, width, height, shading = true, sampleDistance = DEFAULTS.sampleDistance }) {
+    const gl = this.gl;
+    this._useTF(tf, sampleDistance);
+    const fb = gl.createFramebuffer();
+    gl.bindFramebuffer(gl.FRAMEBUFFER, fb);
+    gl.activeTexture(gl.TEXTURE3);
+    const t = gl.createTexture();
+    gl.bindTexture(gl.TEXTURE_2D, t);
+    gl.texStorage2D(gl.TEXTURE_2D, 1, gl.RGBA8, width, height);
+    gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.TEXTURE_2D, t, 0);
+    gl.drawBuffers([gl.COLOR_ATTACHMENT0]);
+    const prog = this.progRender;
+    this._common(prog, { camera, width, height, sampleDistance });
+    gl.uniform4fv(prog.u.u_shade, DEFAULTS.shade);
+    gl.uniform1i(prog.u.u_shading, shading ? 1 : 0);
+    gl.uniform3f(prog.u.u_bg, 0, 0, 0);
+    gl.uniform1i(prog.u.u_alphaOut, 1);
+    gl.viewport(0, 0, width, height);
+    gl.drawArrays(gl.TRIANGLES, 0, 3);
+    const px = new Uint8Array(width * height * 4);
+    gl.readPixels(0, 0, width, height, gl.RGBA, gl.UNSIGNED_BYTE, px);
+    gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+    gl.deleteFramebuffer(fb);
+    gl.deleteTexture(t);
+    const out = new Uint8Array(width * height * 4);
+    for (let y = 0; y < height; y++) out.set(px.subarray((height - 1 - y) * width * 4, (height - y) * width * 4), y * width * 4);
+    return out;
   }
 
   /** The canvas's picture as RGB bytes, rows top to bottom (for tests and exports). */

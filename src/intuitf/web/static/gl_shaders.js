@@ -23,7 +23,7 @@ precision highp sampler2D;
 
 uniform sampler3D u_vol;   // R8 (original bytes) or R16F (normalised values), linear filter
 uniform sampler3D u_vis;   // R8 per block: visible (1) or skipped (0), nearest
-uniform sampler2D u_lut;   // RGBA32F, entry q at (q % 256, q / 256), straight colour
+uniform sampler2D u_lut;   // RGBA32F (L × 1), straight colour, linear filter
 uniform vec3 u_dims;       // nx, ny, nz
 uniform ivec3 u_nb;        // blocks per axis
 uniform vec3 u_is;         // 1 / spacing (spacing in units of the smallest)
@@ -47,7 +47,12 @@ float value(vec3 p) {
 }
 
 vec4 lutAt(int q) {
-  return texelFetch(u_lut, ivec2(q & 255, q >> 8), 0);
+  return texelFetch(u_lut, ivec2(q, 0), 0);
+}
+
+// Entry x (a fractional index) interpolated between its neighbours by the texture's filter.
+vec4 lutLerp(float x) {
+  return texture(u_lut, vec2((x + 0.5) / float(u_nl), 0.5));
 }
 
 vec2 slab(float o, float d, float hi, vec2 t) {
@@ -99,6 +104,7 @@ ${COMMON}
 uniform vec4 u_shade;      // ambient, diffuse, specular, shininess
 uniform int u_shading;
 uniform vec3 u_bg;
+uniform int u_alphaOut;    // 1: premultiplied RGBA (for compositing in the page), 0: over u_bg
 out vec4 outColor;
 
 void main() {
@@ -119,22 +125,24 @@ void main() {
   if (t.y >= t.x) {
     int n = int((t.y - t.x) / u_dt) + 1;
     int k = 0;
+    ivec3 cur = ivec3(-1);
+    bool seen = false;
     while (k < n) {
       float tt = t.x + float(k) * u_dt;
       vec3 p = oi + tt * di;
       ivec3 b = blockOf(p);
-      if (texelFetch(u_vis, b, 0).r < 0.5) {
+      if (b != cur) {
+        cur = b;
+        seen = texelFetch(u_vis, b, 0).r > 0.5;
+      }
+      if (!seen) {
         k = skipBlock(b, oi, di, t.x, k);
         continue;
       }
-      float x = value(p) * scale;
-      int q = clamp(int(x), 0, u_nl - 2);
-      float f = x - float(q);
-      vec4 c0 = lutAt(q);
-      vec4 c1 = lutAt(q + 1);
-      float a = c0.a * (1.0 - f) + c1.a * f;
+      vec4 e = lutLerp(value(p) * scale);
+      float a = e.a;
       if (a > 0.0) {
-        vec3 c = c0.rgb * (1.0 - f) + c1.rgb * f;
+        vec3 c = e.rgb;
         if (u_shading == 1) {
           vec3 g = 0.5 * vec3(
             value(p + vec3(1.0, 0.0, 0.0)) - value(p - vec3(1.0, 0.0, 0.0)),
@@ -158,7 +166,7 @@ void main() {
       k += 1;
     }
   }
-  outColor = vec4(acc + tr * u_bg, 1.0);
+  outColor = u_alphaOut == 1 ? vec4(acc, 1.0 - tr) : vec4(acc + tr * u_bg, 1.0);
 }`;
 
 /** Per-feature attribution (kernels.attribute over the sample cache's nearest-entry samples):
@@ -187,11 +195,17 @@ void main() {
   if (t.y >= t.x) {
     int n = int((t.y - t.x) / u_dt) + 1;
     int k = 0;
+    ivec3 cur = ivec3(-1);
+    bool seen = false;
     while (k < n) {
       float tt = t.x + float(k) * u_dt;
       vec3 p = oi + tt * di;
       ivec3 b = blockOf(p);
-      if (texelFetch(u_vis, b, 0).r < 0.5) {
+      if (b != cur) {
+        cur = b;
+        seen = texelFetch(u_vis, b, 0).r > 0.5;
+      }
+      if (!seen) {
         k = skipBlock(b, oi, di, t.x, k);
         continue;
       }

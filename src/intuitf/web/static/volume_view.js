@@ -1,6 +1,9 @@
-// Volume interaction view: the current result rendered by the server, frame by frame, over the
-// WebSocket /api/view.
+// Volume interaction view: the current result, rendered by the page itself with WebGL2
+// (gl_view.js: full resolution while dragging, hand edits and toggles at once, pick and outline
+// from an attribution pass on the GPU), or, where the page cannot, by the server frame by frame
+// over the WebSocket /api/view.
 //
+// Server frames:
 // Drag rotates (azimuth, elevation); shift-drag or right-drag pans; the wheel zooms. While
 // dragging the server sends small JPEG frames, on release one full PNG; only the newest
 // request is ever rendered (one frame in flight, the latest camera waiting). A click without a
@@ -8,6 +11,7 @@
 // there): its outline is drawn at once and it is selected in the decomposition view.
 
 import * as api from "./api.js";
+import * as glv from "./gl_view.js";
 import { showError, showMessage } from "./messages.js";
 import {
   DEFAULT_CAMERA,
@@ -37,6 +41,8 @@ let drag = null;
 let wheelTimer = null;
 let lastTargetKey = "";
 let frameCount = 0;
+let noteEl;
+let glPending = null; // the quality of the page frame waiting for the next animation frame
 
 export function initVolumeView() {
   stage = document.getElementById("view-stage");
@@ -46,6 +52,17 @@ export function initVolumeView() {
   statsEl = document.getElementById("view-stats");
   pickInfo = document.getElementById("pick-info");
   titleEl = document.getElementById("view-title");
+  noteEl = document.createElement("div");
+  noteEl.id = "view-note";
+  noteEl.className = "view-note";
+  noteEl.setAttribute("aria-live", "polite");
+  stage.append(noteEl);
+  glv.initGLView({
+    onReady: () => frame("full"),
+    onNote: (text) => {
+      noteEl.textContent = text;
+    },
+  });
 
   socket = new api.ViewSocket({
     onFrame: showFrame,
@@ -90,7 +107,7 @@ export function initVolumeView() {
     if (cam && !state.cameraTouched && !sameCamera(normCamera(cam), state.camera)) set({ camera: normCamera(cam) });
   });
   updateTitle();
-  window.intuitfDebug = { state, get frames() { return frameCount; }, socket };
+  window.intuitfDebug = { state, get frames() { return frameCount; }, socket, gl: glv };
 }
 
 function normCamera(c) {
@@ -165,6 +182,18 @@ export function frame(quality = "full") {
     return;
   }
   stage.classList.remove("empty");
+  const gt = pageTarget(t);
+  if (gt) {
+    const st = glv.ensureVolume(gt.volume);
+    if (st === "ready") {
+      pageFrame(quality);
+      return;
+    }
+    if (st === "loading") {
+      setBusy(true); // the first picture comes when the volume is in the page
+      return;
+    }
+  }
   const msg = {
     target: t,
     camera: cameraJSON(),
@@ -177,6 +206,59 @@ export function frame(quality = "full") {
   lastTargetKey = JSON.stringify(t).slice(0, 200);
   setBusy(true);
   socket.request(msg);
+}
+
+/** {volume, tf} when the page renders `t` itself (its volume known to the server by id), else null. */
+function pageTarget(t) {
+  if (!glv.renderer() || !t) return null;
+  if (t.volume) return { volume: t.volume, tf: t.tf };
+  const c = state.candidate;
+  const vol = state.runDetail && state.runDetail.volume_id;
+  if (t.candidate && c && c.qid === t.candidate && c.tf && vol) return { volume: vol, tf: c.tf };
+  return null;
+}
+
+/** Draw a page frame at the next animation frame (many requests in one frame draw once). */
+function pageFrame(quality) {
+  const first = glPending === null;
+  if (glPending !== "full") glPending = quality;
+  if (first) requestAnimationFrame(drawPageFrame);
+}
+
+function drawPageFrame() {
+  const quality = glPending || "full";
+  glPending = null;
+  const gt = pageTarget(target());
+  if (!gt || !glv.ready(gt.volume)) return frame(quality);
+  const camera = cameraJSON();
+  const res = glv.draw(ctx, { tf: gt.tf, camera, size: viewSize, shading: state.shaded, background: hexToRgb(state.background), quality });
+  setBusy(false);
+  frameCount += 1;
+  canvas.dataset.quality = quality;
+  canvas.dataset.frames = String(frameCount);
+  canvas.dataset.renderer = "webgl2";
+  const sw = glv.renderer().software ? " (software)" : "";
+  statsEl.textContent = `${res.width}×${res.height} ${quality} · ${Math.round(res.ms)} ms · WebGL2${sw}`;
+  const base = glv.note();
+  noteEl.textContent = res.reduced
+    ? `${base ? `${base} ` : ""}Dragging at ${res.width}² (software WebGL is slow here); ${viewSize}² on release.`
+    : base;
+  if (quality === "full") {
+    set({ viewSettled: { camera, size: viewSize, shaded: state.shaded, key: JSON.stringify(t0key(gt)), n: frameCount } });
+    if (state.selected.size) drawOverlay();
+  }
+}
+
+function t0key(gt) {
+  return [gt.volume, gt.tf && gt.tf.gaussians].map((x) => JSON.stringify(x)).join("|").slice(0, 200);
+}
+
+/** The features strip drawn by the page from the settled camera, or null (then the server). */
+export function pageFeatures(size) {
+  const gt = pageTarget(target());
+  if (!gt || state.draft) return null;
+  const cam = (state.viewSettled && state.viewSettled.camera) || cameraJSON();
+  return glv.features(gt.volume, { tf: gt.tf, camera: cam, size, shading: state.shaded, background: hexToRgb(state.background) });
 }
 
 function setBusy(b) {
@@ -297,6 +379,14 @@ async function pickAt(e, add) {
   }
   const camera = cameraJSON();
   const was = state.current;
+  const gt = pageTarget(t);
+  if (gt && glv.ready(gt.volume) && glv.canPick()) {
+    // The page's own pick: an attribution pass on the GPU and the smallest-area rule.
+    clickStart = performance.now();
+    const res = glv.pick(gt.tf, camera, viewSize, x, y);
+    applyPick(res, { camera, x, y, add });
+    return;
+  }
   try {
     const path = preview
       ? `/api/volumes/${api.enc(preview.volume)}/pick`
@@ -311,6 +401,16 @@ async function pickAt(e, add) {
       background: hexToRgb(state.background), // the still's background: one sample cache for both
     });
     if (state.current !== was) return;
+    applyPick(res, { camera, x, y, add });
+  } catch (err) {
+    showError(err);
+  }
+}
+
+let clickStart = null;
+
+function applyPick(res, { camera, x, y, add }) {
+  {
     state.follow = false;
     let selected;
     if (res.index === null || res.index === undefined) {
@@ -324,8 +424,6 @@ async function pickAt(e, add) {
       pickInfo.textContent = `Selected feature ${res.index + 1}${n > 1 ? ` (the smallest of ${n} visible here)` : ""}.`;
     }
     set({ pick: { ...res, camera, size: viewSize, x, y }, selected });
-  } catch (err) {
-    showError(err);
   }
 }
 
@@ -347,9 +445,34 @@ async function maskPixels(uri, size) {
   return data;
 }
 
+/** The selection's pixels from the page's attribution pass: {bits, index} or null. */
+function pageSelection() {
+  const gt = pageTarget(target());
+  if (!gt || !glv.ready(gt.volume) || !glv.canPick() || state.draft || !state.selected.size) return null;
+  const indices = [...state.selected].sort((a, b) => a - b);
+  const bits = glv.selectionMask(gt.tf, cameraJSON(), viewSize, indices);
+  return bits ? { bits, index: indices.join(",") } : null;
+}
+
 async function drawOverlay() {
   const p = state.pick;
   const mctx = maskCanvas.getContext("2d");
+  if (pageTarget(target()) && glv.canPick() && glv.ready(pageTarget(target()).volume)) {
+    // Drawn by the page: the selected features' outline, for the camera on view (none while
+    // the camera moves; the frame after it stops brings it back).
+    const sel = drag && drag.moved ? null : pageSelection();
+    if (!sel) {
+      mctx.clearRect(0, 0, maskCanvas.width, maskCanvas.height);
+      maskCanvas.dataset.index = "";
+      return;
+    }
+    paintMask(mctx, viewSize, (i) => sel.bits[i] === 1, sel.index);
+    if (clickStart !== null) {
+      glv.stats.clickToOutlineMs = Math.round(performance.now() - clickStart);
+      clickStart = null;
+    }
+    return;
+  }
   const show = p && p.mask && p.index !== null && state.selected.has(p.index) && sameCamera(p.camera, state.camera) && !state.draft;
   if (!show) {
     mctx.clearRect(0, 0, maskCanvas.width, maskCanvas.height);
@@ -364,11 +487,15 @@ async function drawOverlay() {
     return;
   }
   if (state.pick !== p) return;
+  const a = src.data;
+  paintMask(mctx, size, (i) => a[i * 4 + 3] > 96, String(p.index));
+}
+
+/** Paint a selection (inside(i) per pixel) on the mask layer: outline opaque, inside faint. */
+function paintMask(mctx, size, inside, index) {
   maskCanvas.width = size;
   maskCanvas.height = size;
   const out = mctx.createImageData(size, size);
-  const a = src.data;
-  const inside = (i) => a[i * 4 + 3] > 96;
   let count = 0;
   for (let y = 0; y < size; y++) {
     for (let x = 0; x < size; x++) {
@@ -385,7 +512,7 @@ async function drawOverlay() {
     }
   }
   mctx.putImageData(out, 0, 0);
-  maskCanvas.dataset.index = String(p.index);
+  maskCanvas.dataset.index = index;
   maskCanvas.dataset.pixels = String(count);
 }
 
