@@ -42,7 +42,17 @@ class BudgetExhausted(IntuitfError):
 
 
 class SessionError(IntuitfError):
-    """A run directory is missing, corrupt or cannot be written."""
+    """A run cannot be started, continued or driven as asked (the base of the run errors below:
+    catching it catches them all)."""
+
+
+class RunLocked(SessionError):
+    """Another process (or another session in this one) drives the run folder."""
+
+
+class StorageError(SessionError):
+    """The run folder cannot be read or written: missing, corrupt, unwritable or a full disk.
+    Everything written before it stays; the run continues with a resume once it is fixed."""
 
 
 class RunCancelled(IntuitfError):

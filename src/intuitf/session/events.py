@@ -143,7 +143,7 @@ class EventLog:
             unsubscribe()
 
     def _append(self, event: RunEvent) -> None:
-        from intuitf.errors import SessionError
+        from intuitf.errors import StorageError
 
         assert self.path is not None
         try:
@@ -151,7 +151,7 @@ class EventLog:
             with open(self.path, "a", encoding="utf-8") as fh:
                 fh.write(json.dumps(event.to_dict(), separators=(",", ":")) + "\n")
         except OSError as exc:
-            raise SessionError(f"Cannot append to {self.path}: {exc.strerror or exc}.") from exc
+            raise StorageError(f"Cannot append to {self.path}: {exc.strerror or exc}.") from exc
 
 
 def read_events(path: str | os.PathLike | None) -> list[RunEvent]:

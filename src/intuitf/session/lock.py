@@ -26,7 +26,7 @@ import sys
 import time
 from pathlib import Path
 
-from intuitf.errors import SessionError
+from intuitf.errors import RunLocked, StorageError
 
 try:  # POSIX; on other systems runs are not locked (documented limitation)
     import fcntl
@@ -61,7 +61,7 @@ def _describe(holder: dict) -> str:
 class RunLock:
     """An exclusive, process-lifetime lock on the run folder ``root``.
 
-    ``acquire()`` takes it or raises :class:`~intuitf.errors.SessionError` at once, naming the
+    ``acquire()`` takes it or raises :class:`~intuitf.errors.RunLocked` at once, naming the
     process that holds it; acquiring a lock already held by this object does nothing.
     ``release()`` gives it back (also done by the OS when the process ends). After an
     ``acquire()`` that found a dead holder's record, :attr:`took_over` holds that record and
@@ -94,7 +94,7 @@ class RunLock:
             self.root.mkdir(parents=True, exist_ok=True)
             fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
         except OSError as exc:
-            raise SessionError(
+            raise StorageError(
                 f"Cannot lock the run folder {self.root}: {exc.strerror or exc}.",
                 "Check that the folder is writable.",
             ) from exc
@@ -104,7 +104,7 @@ class RunLock:
             holder = _read_holder(fd)
             os.close(fd)
             who = _describe(holder) if holder else "another process"
-            raise SessionError(
+            raise RunLocked(
                 f"The run folder {self.root} is in use by {who}.",
                 "Only one process may drive a run at a time: wait for it to finish, or stop it "
                 "(its progress is kept) and then continue with `intuitf optimize --resume "

@@ -25,11 +25,11 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
-from intuitf.errors import SessionError
+from intuitf.errors import SessionError, StorageError
 
 
-def _disk_full_error(path: Path, exc: OSError) -> SessionError:
-    return SessionError(
+def _disk_full_error(path: Path, exc: OSError) -> StorageError:
+    return StorageError(
         f"Cannot write {path}: the disk is full. Everything written before this point is kept.",
         "Free some space, then continue with --resume.",
     )
@@ -39,7 +39,7 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` so that readers see the old file or the new one, never half."""
     from intuitf.fileio import atomic_write_bytes as write
 
-    write(path, data, error=SessionError, hint=None,
+    write(path, data, error=StorageError, hint=None,
           full_hint="Free some space, then continue with --resume.")  # fmt: skip
 
 
@@ -116,7 +116,7 @@ class RunDirectory:
         try:
             self.root.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            raise SessionError(
+            raise StorageError(
                 f"Cannot create the run folder {self.root}: {exc.strerror or exc}."
             ) from exc
         if overwrite:
@@ -131,12 +131,12 @@ class RunDirectory:
         try:
             return json.loads(self.run_json.read_text(encoding="utf-8"))
         except FileNotFoundError as exc:
-            raise SessionError(
+            raise StorageError(
                 f"{self.root} is not a run folder (no run.json).",
                 "Point --resume at a folder written by `intuitf optimize`.",
             ) from exc
         except (OSError, json.JSONDecodeError) as exc:
-            raise SessionError(f"{self.run_json} is unreadable or corrupt: {exc}.") from exc
+            raise StorageError(f"{self.run_json} is unreadable or corrupt: {exc}.") from exc
 
     def append_journal(self, entry: dict) -> None:
         """Append one line and fsync it: the journal is the run's memory."""
@@ -150,7 +150,7 @@ class RunDirectory:
         except OSError as exc:
             if exc.errno == errno.ENOSPC:
                 raise _disk_full_error(self.journal, exc) from exc
-            raise SessionError(f"Cannot append to {self.journal}: {exc.strerror or exc}.") from exc
+            raise StorageError(f"Cannot append to {self.journal}: {exc.strerror or exc}.") from exc
 
     def read_journal(self) -> list[dict]:
         """All complete entries; a line cut short by a crash is ignored."""
@@ -188,7 +188,7 @@ class RunDirectory:
         try:
             return json.loads(self.checkpoint.read_text(encoding="utf-8"))
         except (OSError, json.JSONDecodeError) as exc:
-            raise SessionError(
+            raise StorageError(
                 f"The checkpoint {self.checkpoint} is corrupt: {exc}.",
                 "Delete it to restart the run from the beginning (paid verdicts stay cached).",
             ) from exc

@@ -39,7 +39,14 @@ from typing import Any
 
 import numpy as np
 
-from intuitf.errors import BudgetExhausted, IntuitfError, JudgeError, RunCancelled, SessionError
+from intuitf.errors import (
+    BudgetExhausted,
+    IntuitfError,
+    JudgeError,
+    RunCancelled,
+    SessionError,
+    StorageError,
+)
 from intuitf.evaluator.types import Aspect, Cost, Intent, Judge
 from intuitf.session.events import EventLog
 from intuitf.session.helpers import _judge_name, _paid
@@ -550,7 +557,7 @@ class Session(SessionOpening, SessionInteraction):
             )
         except (KeyboardInterrupt, asyncio.CancelledError):
             reason, message = "interrupted", "Interrupted by the user."
-        except SessionError as exc:  # the run folder cannot be written (full disk, ...)
+        except StorageError as exc:  # the run folder cannot be written (full disk, ...)
             reason, message = "storage", str(exc)
         return self._finish(reason, message, write_outputs)
 
