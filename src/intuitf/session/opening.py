@@ -72,6 +72,8 @@ class SessionOpening:
                     f"Continue it with --resume {rd.root}, or pick another folder "
                     "(-o) or --overwrite.",
                 )
+            # The volume's path as seen from the run folder too: a moved tree still finds it.
+            spec = spec.model_copy(update={"volume": spec.volume.anchored(rd.root)})
             created = not rd.root.exists()
             rd.root.mkdir(parents=True, exist_ok=True)
             lock = RunLock(rd.root)
@@ -279,7 +281,7 @@ class SessionOpening:
             spec, moved = _moved_spec(spec, evaluator, base_url, budget_usd, budget_calls,
                                       judge_options, judge is None)  # fmt: skip
             ckpt = rd.read_checkpoint()
-            vol = volume if volume is not None else spec.volume.load()
+            vol = volume if volume is not None else spec.volume.load(rd.root)
             if judge is None:
                 judge = build_judge(spec.judge, rd.root, settings.protocol)
             generation = int(ckpt["generation"]) if ckpt else 0

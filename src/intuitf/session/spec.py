@@ -17,6 +17,7 @@ them into the run folder (``intent/``) and the spec written there points at the 
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -194,7 +195,13 @@ def check_judge_options(options: dict[str, Any]) -> dict[str, Any]:
 
 
 class VolumeSpec(_Model):
-    """Where the volume comes from: a path (file or folder) with reader options, or ``phantom``."""
+    """Where the volume comes from: a path (file or folder) with reader options, or ``phantom``.
+
+    A path is stored absolute (made so from the working directory when the spec is read), so
+    a run continues from any working directory. ``relative`` is the same file as seen from the
+    run folder, kept when the volume sits near it (:meth:`anchored`): a tree moved or mounted
+    elsewhere as a whole still finds its volume (:meth:`load` says which it used).
+    """
 
     source: str
     shape: tuple[int, int, int] | None = None
@@ -202,17 +209,69 @@ class VolumeSpec(_Model):
     byte_order: Literal["little", "big"] | None = None
     spacing: tuple[float, float, float] | None = None
     max_dim: int | None = Field(default=None, ge=2)
+    relative: str | None = None
+
+    @field_validator("source")
+    @classmethod
+    def _absolute(cls, v: str) -> str:
+        if _is_builtin(v):
+            return v
+        return str(Path(v).expanduser().absolute())
 
     def reader_options(self) -> dict[str, Any]:
         """Keyword arguments for :func:`intuitf.volume.load_volume`."""
-        kw = self.model_dump(exclude={"source"})
+        kw = self.model_dump(exclude={"source", "relative"})
         return {k: v for k, v in kw.items() if v is not None}
 
-    def load(self):
-        """Read the volume (raises :class:`~intuitf.errors.VolumeError` with a hint)."""
+    def anchored(self, run_dir: str | Path) -> VolumeSpec:
+        """This spec with ``relative`` set for a run in ``run_dir``: when the volume sits in the
+        tree of the run folder's near ancestors (at most ``_NEAR`` levels up), as in
+        ``project/scans/head.nii`` beside ``project/runs/r1``."""
+        if _is_builtin(self.source):
+            return self
+        run = Path(run_dir).expanduser().absolute()
+        try:
+            rel = os.path.relpath(self.source, run)
+        except ValueError:  # another drive (Windows)
+            rel = None
+        if rel is not None and Path(rel).parts.count("..") > _NEAR:
+            rel = None
+        return self.model_copy(update={"relative": rel})
+
+    def load(self, run_dir: str | Path | None = None):
+        """Read the volume (raises :class:`~intuitf.errors.VolumeError` with a hint).
+
+        When the absolute path is gone but the volume is found at ``relative`` from
+        ``run_dir`` (the tree was moved), that one is read, and the volume's notes say so.
+        """
         from intuitf.volume import load_volume
 
-        return load_volume(self.source, **self.reader_options())
+        source, note = self.source, None
+        if run_dir is not None and self.relative and not Path(source).exists():
+            moved = Path(run_dir).expanduser().absolute() / self.relative
+            if moved.exists():
+                source = str(moved.resolve())
+                note = (
+                    f"Volume read from {source} (where it sits relative to the run folder); "
+                    f"the recorded path {self.source} is gone."
+                )
+        vol = load_volume(source, **self.reader_options())
+        if note is not None and isinstance(getattr(vol, "notes", None), list):
+            vol.notes.append(note)
+        return vol
+
+
+#: How many levels above a run folder its volume may sit and still be found from it.
+_NEAR = 3
+
+
+def _is_builtin(source: str) -> bool:
+    """A source that names no file: the phantom, or nothing (an in-memory volume)."""
+    return (
+        not source
+        or source.startswith("builtin:")
+        or (source == "phantom" and not Path(source).exists())
+    )
 
 
 class IntentSpec(_Model):

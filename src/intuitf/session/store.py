@@ -322,7 +322,8 @@ class RunStore:
         info = self.candidate(qid)
         record = RunDirectory(self.path_of(info.run)).read_run()
         settings = RunSettings.from_dict(record.get("settings", {}))
-        vol = volume if volume is not None else spec_of_record(record).volume.load()
+        run_dir = self.path_of(info.run)
+        vol = volume if volume is not None else spec_of_record(record).volume.load(run_dir)
         camera = Camera.from_dict(settings.camera) if settings.camera else Camera()
         r = VolumeRenderer(
             vol,
