@@ -121,9 +121,9 @@ def test_a_model_judge_is_shown_the_selection(monkeypatch):
     sent: list[list[dict]] = []
     original = MLLMJudge._complete
 
-    async def spy(self, messages, schema, estimate):
+    async def spy(self, messages, *args, **kwargs):
         sent.append(messages)
-        return await original(self, messages, schema, estimate)
+        return await original(self, messages, *args, **kwargs)
 
     monkeypatch.setattr(MLLMJudge, "_complete", spy)
     with FakeMLLMServer(target=gold) as srv:

@@ -12,7 +12,7 @@ from intuitf.explorer.bounds import Bounds
 from intuitf.explorer.candidate import Candidate, candidate_id
 from intuitf.explorer.fitness import rank_fitness
 from intuitf.explorer.genome import is_duplicate_of_any
-from intuitf.explorer.hints import Hint, as_hints, hint_for, hinted_tf
+from intuitf.explorer.hints import Hint, as_hints, hint_for, hinted_tf, quiet_hidden
 from intuitf.explorer.operators import MutationParams, mutate
 from intuitf.explorer.population import materials_of, random_tf, seeded_tf
 from intuitf.explorer.stages import STAGES, StagePreset
@@ -276,6 +276,8 @@ class BaseExplorer:
             # A made TF is named by its candidate id (exports and plots show it); the
             # parent's name and metadata would describe a different TF.
             tf = replace(tf, name=cid, metadata={})
+            # What the words hide stays hidden in every candidate (the background: no fog).
+            tf = quiet_hidden(tf, self.hints, self.bounds)
         return Candidate(cid, tf, self._generation, origin, tuple(parents))
 
     def _color(self, rng: np.random.Generator) -> tuple[float, float, float]:
@@ -353,7 +355,7 @@ class BaseExplorer:
             before = len(pop)
             pop = self._fill_with_variants(pop, len(pop) + n_var, parents=made)
             made += pop[before:]
-        placed = any(h.center is not None for h in self.hints)
+        placed = any(h.center is not None and not h.hidden for h in self.hints)
         n_hint = round(self._preset.hint_share * (n - len(made))) if placed else 0
         for _ in range(n_hint):
             c = self._unique(self._hinted, "hint", pop)

@@ -22,6 +22,14 @@ from intuitf.tf.gaussian import Gaussian, GaussianTF
 
 RGB = tuple[float, float, float]
 
+#: What an edit may ask of the selected features' look.
+EDIT_DIRECTIONS = (None, "fainter", "hidden", "stronger", "brighter", "darker")
+#: Height factors per step of an edit that asks for less or more opacity, from the first
+#: refined generation on: clearly fainter (at most a third, often a tenth: a thick wall is
+#: still opaque at half its height) or clearly stronger.
+FAINTER = (0.05, 0.35)
+STRONGER = (1.5, 4.0)
+
 #: A Gaussian belongs to a hint when its mean is within this many of the hint's spreads...
 _REACH = 2.5
 #: ...or within this absolute distance (normalised units), whichever is larger.
@@ -38,8 +46,18 @@ class Hint:
     color: RGB | None = None
     height: tuple[float, float] | None = None
     hidden: bool = False
+    #: An edit's direction for the selected features: "fainter", "hidden", "stronger",
+    #: "brighter", "darker" (None: no opacity or lightness word).
+    direction: str | None = None
+    #: An edit that names no colour keeps the selected features' colours.
+    keep_color: bool = False
 
     def __post_init__(self) -> None:
+        if self.direction not in EDIT_DIRECTIONS:
+            raise ValueError(
+                f"A hint's direction must be one of {sorted(d for d in EDIT_DIRECTIONS if d)}"
+                f" or None, got {self.direction!r}."
+            )
         if self.center is not None and not 0.0 <= float(self.center) <= 1.0:
             raise ValueError(f"A hint's center must be within [0, 1], got {self.center!r}.")
         if not float(self.spread) > 0:
@@ -71,6 +89,8 @@ class Hint:
             "color": list(self.color) if self.color else None,
             "height": list(self.height) if self.height else None,
             "hidden": self.hidden,
+            "direction": self.direction,
+            "keep_color": self.keep_color,
         }
 
     @classmethod
@@ -82,6 +102,8 @@ class Hint:
             color=None if d.get("color") is None else tuple(d["color"]),
             height=None if d.get("height") is None else tuple(d["height"]),
             hidden=bool(d.get("hidden", False)),
+            direction=d.get("direction"),
+            keep_color=bool(d.get("keep_color", False)),
         )
 
 
@@ -179,3 +201,85 @@ def hinted_tf(
             height = sample_hint_height(rng, (lo, max(lo, 0.03)), bounds)
         gs.append(Gaussian(float(mean), float(width), height, color(rng)))
     return GaussianTF(tuple(sorted(gs, key=lambda g: g.mean)), value_range=value_range)
+
+
+def edit_hint(hints: Sequence[Hint]) -> Hint | None:
+    """The hint of an edit (no place: it applies to the selected features), if any."""
+    for h in hints:
+        if h.center is None and (h.direction or h.keep_color or h.color or h.hidden):
+            return h
+    return None
+
+
+def edit_step(g: Gaussian, hint: Hint, rng: np.random.Generator, bounds: Bounds) -> Gaussian:
+    """``g`` moved the way an edit asks: opacity and colour, never its place or width.
+
+    "fainter" multiplies the height by a factor in ``FAINTER``, "stronger" by one in
+    ``STRONGER`` (from at least the bounds' initial low), "hidden" sets it to 0; with no such
+    word the height takes a small step. A named colour is taken (slightly varied); "brighter"
+    and "darker" move the lightness; otherwise the colour stays as it is.
+    """
+    from dataclasses import replace
+
+    from intuitf.explorer.bounds import hsl_to_rgb, rgb_to_hsl
+
+    h = g.height
+    d = hint.direction
+    if hint.hidden or d == "hidden":
+        h = 0.0
+    elif d == "fainter":
+        h = h * math.exp(rng.uniform(math.log(FAINTER[0]), math.log(FAINTER[1])))
+    elif d == "stronger":
+        base = max(h, bounds.height_init[0])
+        h = base * math.exp(rng.uniform(math.log(STRONGER[0]), math.log(STRONGER[1])))
+    else:
+        h = h * math.exp(rng.normal(0.0, 0.15))
+    h = min(bounds.height[1], max(bounds.height[0], h))
+    color = g.color
+    if hint.color is not None:
+        color = bounds.sample_palette_color(rng, [hint.color])
+    elif d in ("brighter", "darker"):
+        hue, sat, lum = rgb_to_hsl(g.color)
+        step = rng.uniform(0.08, 0.25) * (1.0 if d == "brighter" else -1.0)
+        color = bounds.clip_color(hsl_to_rgb(hue, sat, min(1.0, max(0.0, lum + step))))
+    return replace(g, height=float(h), color=color)
+
+
+#: A Gaussian may give the values a hidden material mostly holds at most this opacity.
+HIDDEN_EPS = 2e-3
+
+
+def quiet_hidden(tf: GaussianTF, hints: Sequence[Hint], bounds: Bounds) -> GaussianTF:
+    """``tf`` with no free Gaussian showing a hidden material (the background, unless the
+    words ask for it).
+
+    A hidden material's bulk is its hint's center ± one spread. A free Gaussian that gives
+    those values more than ``HIDDEN_EPS`` of opacity is narrowed until it does not; one that
+    sits on them, or would have to be narrower than the bounds allow, is switched off. Over
+    a material as common as air, even a faint tail is a fog over the whole volume box.
+    """
+    from dataclasses import replace
+
+    hidden = [h for h in hints if h.hidden and h.center is not None]
+    if not hidden:
+        return tf
+    gs = list(tf.gaussians)
+    changed = False
+    for i, g in enumerate(gs):
+        if g.frozen or g.height <= HIDDEN_EPS:
+            continue
+        for h in hidden:
+            lo, hi = h.center - h.spread, h.center + h.spread
+            nearest = min(hi, max(lo, g.mean))
+            gap = abs(g.mean - nearest)
+            peak = g.height * math.exp(-(gap**2) / (2.0 * g.width**2))
+            if peak <= HIDDEN_EPS:
+                continue
+            w_max = gap / math.sqrt(2.0 * math.log(g.height / HIDDEN_EPS)) if gap > 0 else 0.0
+            if w_max >= bounds.width[0]:
+                g = replace(g, width=float(min(g.width, w_max)))
+            else:
+                g = replace(g, height=0.0)
+            changed = True
+        gs[i] = g
+    return tf.with_gaussians(gs) if changed else tf

@@ -15,7 +15,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from intuitf.explorer.bounds import Bounds, hsl_to_rgb, rgb_to_hsl
-from intuitf.explorer.hints import Hint, hint_for, sample_hint_height
+from intuitf.explorer.hints import Hint, edit_hint, edit_step, hint_for, sample_hint_height
 from intuitf.tf.gaussian import Gaussian, GaussianTF
 
 #: Gaussian attributes crossover may exchange.
@@ -122,6 +122,13 @@ def mutate(
     free = [i for i, g in enumerate(gs) if not g.frozen and (only is None or i in only)]
     if not free:
         return tf
+    edit = edit_hint(p.hints) if p.hints else None
+    if edit is not None:
+        # An edit of selected features says what to do ("transparent", "gold"): each free
+        # (selected) Gaussian moves that way, and nothing else about it changes.
+        for i in free:
+            gs[i] = edit_step(gs[i], edit, rng, b)
+        return tf.with_gaussians(gs)
     hinted: dict[int, Hint] = {}
     for i in free:
         g = gs[i]

@@ -195,6 +195,7 @@ class MaterialHint:
     spread: float = 0.03
     placed_by: str = ""
     structure: int | None = None  # the structure it was placed on (a part word)
+    direction: str | None = None  # an edit's direction (see :func:`edit_direction`)
     thin: bool = False  # that structure is thin, plate-like or scattered: it needs more opacity
 
     @property
@@ -214,6 +215,9 @@ class MaterialHint:
             "color": list(self.rgb) if self.rgb else None,
             "height": list(band) if band else None,
             "hidden": self.opacity == "hidden",
+            "direction": self.direction,
+            # An edit that names no colour keeps the selected features' colours.
+            "keep_color": self.placed_by == "selection" and self.rgb is None,
         }
 
     def describe(self, value_range: tuple[float, float] | None = None) -> str:
@@ -402,14 +406,30 @@ def place_hints(
     layout = _Layout.of(c, mats)
     placed: list[MaterialHint] = []
     parts: dict = {}
+
+    def by_structure(h: MaterialHint) -> bool:
+        # Parts, and bone outside Hounsfield units (its values vary from scan to scan, its
+        # shape and place among the materials do not).
+        return h.role == "part" or (h.material == "bone" and not hu)
+
     if structures is not None:
-        kinds = [kind_of(h.words) for h in parsed.hints if h.role == "part"]
+        kinds = [kind_of(h.words) for h in parsed.hints if by_structure(h)]
         parts = match_parts([k for k in kinds if k], structures)
     for h in parsed.hints:
-        kind = kind_of(h.words) if h.role == "part" else None
-        if kind is not None and kind in parts:
+        kind = kind_of(h.words) if by_structure(h) else None
+        if kind is not None and kind in parts and structures is not None:
             st = parts[kind]
             a, b = st.value_range
+            if kind == "inner":
+                # "The inner part" is everything denser than the object's bulk around it.
+                fg = structures.foreground()
+                vox: dict[int, int] = {}
+                for x in fg:
+                    vox[x.material] = vox.get(x.material, 0) + x.voxels
+                bulk = max(vox, key=lambda m: vox[m])
+                denser = [x for x in fg if x.material > bulk] or [st]
+                a = min(x.value_range[0] for x in denser)
+                b = max(x.value_range[1] for x in denser)
             # Seen where its surface is: the lower part of its values, where it meets what
             # surrounds it, and wide enough to hold the rest of them.
             center = a + 0.35 * (b - a)
@@ -418,7 +438,7 @@ def place_hints(
             placed.append(_with(h, center=float(center), spread=float(spread),
                                 placed_by="structure", structure=st.id, thin=thin))  # fmt: skip
             continue
-        role = _PART_ROLE.get(kind or "", h.role) if h.role == "part" else h.role
+        role = _PART_ROLE.get(kind_of(h.words) or "", h.role) if h.role == "part" else h.role
         term_hu = next((t.hu for t in TERMS if t.material == h.material and t.hu), None)
         if hu and term_hu is not None:
             a, b = (float(np.clip((v - lo) / span, 0.0, 1.0)) for v in term_hu)
@@ -587,6 +607,29 @@ def _keep_density_order(hints: list[MaterialHint], layout: _Layout) -> list[Mate
 # -- for the Session ---------------------------------------------------------------------------
 
 
+_HIDE_RE = re.compile(r"\b(hide|hidden|invisible|remove[d]?|not (shown|visible)|get rid of)\b")
+_BRIGHTER_RE = re.compile(r"\b(brighter|brighten|lighten|lighter colou?r|more vivid|vivid)\b")
+_DARKER_RE = re.compile(r"\b(darker|darken|dimmer|deeper colou?r)\b")
+
+
+def edit_direction(text: str | None) -> str | None:
+    """What an edit asks of its selection's look: "hidden", "brighter", "darker", "fainter",
+    "stronger", or None (only a colour, or nothing checkable)."""
+    low = (text or "").lower()
+    if _HIDE_RE.search(low):
+        return "hidden"
+    if _BRIGHTER_RE.search(low):
+        return "brighter"
+    if _DARKER_RE.search(low):
+        return "darker"
+    look = _look(low)
+    if _LESS_OPAQUE.search(low) or look in ("faint", "semi"):
+        return "fainter"
+    if _MORE_OPAQUE.search(low) or look == "opaque":
+        return "stronger"
+    return None
+
+
 def intent_hints(intent: Intent, volume=None, structures: StructureMap | None = None) -> TextHints:
     """The hints of an intent's text, placed on ``volume`` when given (not for an edit).
 
@@ -596,14 +639,17 @@ def intent_hints(intent: Intent, volume=None, structures: StructureMap | None = 
     parsed = parse_text(intent.text)
     if intent.kind == "edit":
         # The selection says where: every hint applies to the selected features.
-        parsed.hints = [_with(h, center=None, placed_by="selection") for h in parsed.hints]
-        if not parsed.hints and (named_colours(intent.text or "") or _look(intent.text or "")):
+        direction = edit_direction(intent.text)
+        parsed.hints = [
+            _with(h, center=None, placed_by="selection", direction=direction) for h in parsed.hints
+        ]
+        if not parsed.hints and (named_colours(intent.text or "") or direction):
             parsed.hints = [_edit_hint(intent.text or "")]
         return parsed
     if volume is None:
         return parsed
     counts, _ = volume.histogram()
-    if structures is None and any(h.role == "part" for h in parsed.hints):
+    if structures is None and any(h.role == "part" or h.material == "bone" for h in parsed.hints):
         structures = structure_map_of(volume)
     return place_hints(
         parsed, counts, tuple(volume.value_range), getattr(volume, "original_dtype", None),
@@ -643,6 +689,7 @@ def _edit_hint(text: str) -> MaterialHint:
     return MaterialHint(
         clause=low, material="selection", words="the selection", colour=colour,
         rgb=rgb, opacity=_look(low), placed_by="selection",  # type: ignore[arg-type]
+        direction=edit_direction(low),
     )  # fmt: skip
 
 
@@ -651,17 +698,18 @@ def explorer_hints(
 ) -> list[dict]:
     """The hints the Explorer takes for ``intent`` on ``volume`` (empty: none understood).
 
-    With placed hints, the background's values get one more: hidden, unless the words name
-    air. Nobody asks for the empty space around the object to be painted, and a faint
-    Gaussian there is a veil over the whole volume box.
+    Whatever the intent (text, picture, sketch, or none), the background's values get a
+    hint of their own: hidden, unless the words name air. Nobody asks for the empty space
+    around the object to be painted, and a faint Gaussian there is a veil over the whole
+    volume box. (An edit changes selected features only: it gets no background hint.)
     """
     th = intent_hints(intent, volume, structures)
     out = [h.to_explorer() for h in th.hints if h.center is not None or intent.kind == "edit"]
     placed = [h for h in th.hints if h.center is not None]
-    if placed and volume is not None and not any(h.role == "air" for h in placed):
+    if intent.kind != "edit" and volume is not None and not any(h.role == "air" for h in placed):
         counts, _ = volume.histogram()
         layout = _Layout.of(np.asarray(counts, dtype=np.float64), _materials(counts))
-        top = min(layout.cutoff, min(h.center - 2.5 * h.spread for h in placed))
+        top = min([layout.cutoff] + [h.center - 2.5 * h.spread for h in placed])
         if top > layout.background + 0.01:
             # Reaches (2.5 spreads) from the background's mode up to just below the cutoff.
             spread = (top - layout.background) / 2.5

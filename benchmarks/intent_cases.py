@@ -1,0 +1,560 @@
+"""Do words land on the right structures? The paper's case studies, measured on label volumes.
+
+Label volumes are built here from the repository's real volumes with thresholds, morphology and
+connected components (thresholds read off each histogram and checked by looking at slices; the
+script can write those slices with ``--slices DIR``). Each case runs a whole search through the
+Session, then measures the best result of generation 0 and of the last generation, per named
+structure:
+
+- **ΔE2000** between the structure's visible colour and the colour asked for. A structure's
+  visible pixels are those that change (ΔE76 > 8) when its voxels are removed from the volume;
+  its visible colour is the mean CIELAB colour of the picture there. Invisible: ΔE = 100.
+- **opacity**: the TF's mean opacity (Gaussian height units, per unit length) over the
+  structure's voxels, against the words ("opaque" wants >= 0.2, "faint"/"translucent"
+  0.002-0.15, unqualified > 0.002).
+- **haze**: the share of the picture that only background makes visible (alpha > 0.05 when
+  every named or unnamed foreground label is removed).
+
+Judges: ``metric`` (the built-in MetricJudge) and ``oracle`` (a labelling oracle: it prefers,
+in each pair, the picture whose labelled structures are closer to the asked colours and with less
+haze, wrong 10 % of the time). Cases:
+
+    bonsai       "A potted tree with brown pot, silver branch and golden leaves"
+    refine-pot   the bonsai's best, its pot's Gaussians selected, "transparent"
+    tooth-sketch red stroke on the crown top, yellow on the crown middle, blue on the root
+    foot-chest   the foot (ivory bone, faint red skin) as the reference for the chest
+    foot-head    ... and for the head
+    engine       "light blue translucent outer part and orange solid inner part"
+    foot         "opaque ivory bone and faint red skin"
+
+    python benchmarks/intent_cases.py                      # all cases, both judges
+    python benchmarks/intent_cases.py --quick --judge metric --cases bonsai,engine
+    PYTHONPATH=/tmp/before18/src python benchmarks/intent_cases.py   # the code before
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+from skimage.color import deltaE_ciede2000, rgb2lab
+
+from intuitf.evaluator.metric import NAMED_COLOURS, MetricJudge
+from intuitf.evaluator.types import Intent
+from intuitf.render import Camera, VolumeRenderer
+from intuitf.session import RunSettings, Session
+from intuitf.testing.oracle_judge import OracleJudge
+from intuitf.tf.defaults import default_tf
+from intuitf.volume import Volume, load_volume
+
+DATA = Path(
+    os.environ.get(
+        "INTUITF_DATA", Path(__file__).resolve().parents[2] / "shared" / "data" / "volumes"
+    )
+)
+FILES = {
+    "bonsai": "bonsai_256x256x256_uint8.raw.gz",
+    "tooth": "tooth_103x94x161_uint8.raw.gz",
+    "engine": "engine_256x256x128_uint8.raw.gz",
+    "foot": "foot_zfp8lossy_256x256x256_uint8.raw.gz",
+    "head": "ctheadstanford_256x256x113_uint16.raw.gz",
+    "chest": "chestlidc2_256x256x133_uint8.raw.gz",
+}
+#: Judging cameras that show each object (the measure must see the structures).
+CAMERAS = {
+    "bonsai": Camera(azimuth=0.0, elevation=90.0),  # the tree grows along +y: up is +y
+    "tooth": Camera(azimuth=30.0, elevation=10.0),
+    "engine": Camera(azimuth=30.0, elevation=30.0),
+    "foot": Camera(azimuth=30.0, elevation=20.0),
+    "head": Camera(azimuth=0.0, elevation=10.0, roll=180.0),  # z runs from the top of the head
+    "chest": Camera(azimuth=0.0, elevation=10.0),
+}
+
+
+# -- label volumes -------------------------------------------------------------------------------
+
+
+def _largest(mask: np.ndarray, k: int = 1) -> np.ndarray:
+    lab, n = ndimage.label(mask)
+    if n == 0:
+        return mask
+    sizes = np.bincount(lab.ravel())[1:]
+    keep = np.argsort(sizes)[::-1][:k] + 1
+    return np.isin(lab, keep)
+
+
+def labels_for(name: str, d: np.ndarray) -> tuple[np.ndarray, dict[str, int], np.ndarray]:
+    """Label volume (0 background) and label ids by structure name, for volume ``name``.
+
+    Thresholds are normalised values read off each histogram (valleys between its peaks).
+    Each structure then takes the rim of partial-volume values around it (two voxels above the
+    background's values): that rim is its surface in a rendering, not background. Returns the
+    labels with rims, the ids, and the labels without them (for per-voxel opacity).
+    """
+    lab, ids = _core_labels(name, d)
+    core = lab.copy()
+    floor = {"bonsai": 0.08, "tooth": 0.4, "engine": 0.1, "foot": 0.02, "head": 0.15,
+             "chest": 0.03}[name]  # fmt: skip
+    for _ in range(2):
+        grown = ndimage.maximum_filter(lab, size=3)
+        lab = np.where((lab == 0) & (d > floor), grown, lab).astype(np.uint8)
+    return lab, ids, core
+
+
+def _core_labels(name: str, d: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
+    lab = np.zeros(d.shape, np.uint8)
+    if name == "bonsai":  # y up; pot wall dense, trunk and soil mid, leaves low
+        pot = ndimage.binary_closing(_largest(d >= 0.72), iterations=1) & (d >= 0.6)
+        ys = np.nonzero(pot.any(axis=(0, 2)))[0]
+        top = int(ys.max()) if ys.size else 0
+        y = np.arange(d.shape[1])[None, :, None]
+        mid = (d >= 0.27) & (d < 0.72)
+        leaves = (d >= 0.12) & (d < 0.27) & (y > top)
+        leaves &= ndimage.binary_opening(leaves | mid, iterations=0 or 1) | leaves
+        lab[mid & (y <= top)] = 4  # soil (unnamed)
+        lab[mid & (y > top)] = 2
+        lab[leaves] = 3
+        lab[pot] = 1
+        return lab, {"pot": 1, "branch": 2, "leaves": 3, "soil": 4}
+    if name == "tooth":  # z up; enamel cap, dentin below it, the root under the crown
+        enamel = _largest(d >= 0.77)
+        dentin = (d >= 0.5) & (d < 0.77)
+        zs = np.nonzero(enamel.any(axis=(1, 2)))[0]
+        cej = int(zs.min()) if zs.size else d.shape[0] // 2
+        z = np.arange(d.shape[0])[:, None, None]
+        lab[dentin & (z >= cej)] = 2
+        lab[dentin & (z < cej)] = 3
+        lab[enamel] = 1
+        return lab, {"crown top": 1, "crown middle": 2, "root": 3}
+    if name == "engine":
+        lab[(d >= 0.19) & (d < 0.66)] = 1
+        lab[d >= 0.66] = 2
+        return lab, {"outer part": 1, "inner part": 2}
+    cuts = {"foot": (0.035, 0.34), "head": (0.24, 0.535), "chest": (0.047, 0.42)}[name]
+    body = _largest(ndimage.binary_opening(d >= cuts[0], iterations=1))
+    lab[body] = 1
+    lab[body & (d >= cuts[1])] = 2
+    return lab, {"skin": 1, "bone": 2}
+
+
+# -- measures ------------------------------------------------------------------------------------
+
+
+def _renderer(vol: Volume, data: np.ndarray | None, size: int) -> VolumeRenderer:
+    v = vol if data is None else Volume(data, vol.spacing, vol.name, value_range=vol.value_range)
+    return VolumeRenderer(v, size=size, shading=True, background=(0.0, 0.0, 0.0))
+
+
+@dataclass
+class Scene:
+    """A volume, its labels and a camera: everything the measures need."""
+
+    name: str
+    vol: Volume
+    lab: np.ndarray
+    ids: dict[str, int]
+    camera: Camera
+    size: int
+    core: np.ndarray | None = None
+    _r: dict = field(default_factory=dict)
+
+    def renderer(self, key: str) -> VolumeRenderer:
+        """The full volume ('all'), without one label ('-name'), one label alone ('+name'), or
+        background only ('bg')."""
+        if key not in self._r:
+            d = self.vol.data
+            if key == "all":
+                data = None
+            elif key == "bg":
+                data = np.where(self.lab > 0, 0.0, d).astype(np.float32)
+            elif key.startswith("-"):
+                data = np.where(self.lab == self.ids[key[1:]], 0.0, d).astype(np.float32)
+            else:
+                data = np.where(self.lab == self.ids[key[1:]], d, 0.0).astype(np.float32)
+            self._r[key] = _renderer(self.vol, data, self.size)
+        return self._r[key]
+
+    def image(self, tf, key: str = "all") -> np.ndarray:
+        return self.renderer(key).render(tf, self.camera)
+
+    def alpha(self, tf, key: str) -> np.ndarray:
+        return self.renderer(key).render_rgba(tf, self.camera)[..., 3]
+
+
+def _lab(img: np.ndarray) -> np.ndarray:
+    return rgb2lab(np.asarray(img)[..., :3].astype(np.float32) / 255.0)
+
+
+def colour_lab(name: str) -> np.ndarray:
+    return rgb2lab(np.array([[NAMED_COLOURS[name]]], np.float32) / 255.0)[0, 0]
+
+
+def visible(scene: Scene, tf, name: str, full_lab: np.ndarray | None = None):
+    """(mask of the pixels where structure ``name`` shows, its mean CIELAB colour there)."""
+    full = full_lab if full_lab is not None else _lab(scene.image(tf))
+    without = _lab(scene.image(tf, "-" + name))
+    diff = np.linalg.norm(full - without, axis=2)
+    mask = diff > 8.0
+    if mask.sum() < 0.002 * mask.size:
+        return mask, None
+    w = diff[mask][:, None]
+    return mask, (full[mask] * w).sum(axis=0) / w.sum()
+
+
+def voxel_opacity(scene: Scene, tf, name: str) -> float:
+    """The TF's mean opacity (per unit length, as its Gaussians' heights) over the voxels of
+    structure ``name`` (its core, without the partial-volume rim other materials share)."""
+    core = scene.core if scene.core is not None else scene.lab
+    vals = scene.vol.data[core == scene.ids[name]]
+    if vals.size == 0:
+        return 0.0
+    if vals.size > 200_000:
+        vals = vals[:: vals.size // 200_000 + 1]
+    return float(np.mean(tf.opacity(vals)))
+
+
+def measure(scene: Scene, tf, asked: dict[str, tuple]) -> dict:
+    """Per named structure: ΔE2000 to its asked colour, opacity, and the picture's haze."""
+    full = _lab(scene.image(tf))
+    out: dict = {"structures": {}}
+    for name, (colour, look) in asked.items():
+        mask, lab = visible(scene, tf, name, full)
+        target = colour if isinstance(colour, np.ndarray) else colour_lab(colour)
+        de = 100.0 if lab is None else float(deltaE_ciede2000(lab[None], target[None])[0])
+        opacity = voxel_opacity(scene, tf, name)
+        ok = {"opaque": opacity >= 0.2, "faint": 0.002 <= opacity <= 0.15,
+              None: opacity > 0.002}.get(look, True)  # fmt: skip
+        out["structures"][name] = {"dE": de, "opacity": opacity, "opacity_ok": bool(ok),
+                                   "visible_share": float(mask.mean())}  # fmt: skip
+    out["haze"] = float((scene.alpha(tf, "bg") > 0.05).mean())
+    return out
+
+
+def label_oracle(scene: Scene, asked: dict[str, tuple], noise: float, seed: int) -> OracleJudge:
+    """A judge that knows the labels: prefers the picture whose structures' footprints are
+    closer to the asked colours, with less haze (wrong ``noise`` of the time)."""
+    # Footprints: where each named structure would show with every structure opaque,
+    # later (inner, denser) structures in front.
+    from intuitf.tf import Gaussian, GaussianTF
+
+    probe = GaussianTF((Gaussian(0.55, 0.5, 1.0, (1.0, 1.0, 1.0)),))
+    names = list(asked)
+    fps = {n: scene.alpha(probe, "+" + n) > 0.3 for n in names}
+    air = ~np.logical_or.reduce(list(fps.values()))
+    targets = {
+        n: (c if isinstance(c, np.ndarray) else colour_lab(c)) for n, (c, _) in asked.items()
+    }
+
+    def score(img: np.ndarray) -> float:
+        lab = _lab(img)
+        s = 0.0
+        for n in names:
+            m = fps[n]
+            if m.sum() == 0:
+                continue
+            mean = lab[m].mean(axis=0)
+            s -= float(deltaE_ciede2000(mean[None], targets[n][None])[0])
+        s -= 200.0 * float((lab[air][:, 0] > 8.0).mean()) if air.any() else 0.0
+        return s
+
+    return OracleJudge(score, noise=noise, seed=seed)
+
+
+# -- cases ---------------------------------------------------------------------------------------
+
+
+@dataclass
+class Case:
+    name: str
+    volume: str
+    intent: str  # text, or a marker for the other kinds
+    asked: dict  # structure name -> (colour name or CIELAB, look)
+
+
+CASES = [
+    Case("bonsai", "bonsai", "A potted tree with brown pot, silver branch and golden leaves",
+         {"pot": ("brown", None), "branch": ("silver", None), "leaves": ("golden", None)}),
+    Case("refine-pot", "bonsai", "transparent", {}),
+    Case("tooth-sketch", "tooth", "sketch",
+         {"crown top": ("red", None), "crown middle": ("yellow", None), "root": ("blue", None)}),
+    Case("foot-chest", "chest", "reference", {}),
+    Case("foot-head", "head", "reference", {}),
+    Case("engine", "engine", "light blue translucent outer part and orange solid inner part",
+         {"outer part": ("light blue", "faint"), "inner part": ("orange", "opaque")}),
+    Case("foot", "foot", "opaque ivory bone and faint red skin",
+         {"bone": ("ivory", "opaque"), "skin": ("red", "faint")}),
+]  # fmt: skip
+
+#: The foot as the paper's radiologist set it up: ivory bone, faint red-brown skin.
+FOOT_TEXT = "opaque ivory bone and faint red skin"
+
+
+def _scene(name: str, args) -> Scene:
+    vol = load_volume(DATA / FILES[name], max_dim=args.max_dim)
+    lab, ids, core = labels_for(name, vol.data)
+    return Scene(name, vol, lab, ids, CAMERAS[name], args.size, core)
+
+
+def _settings(args, seed: int, generations: int | None = None) -> RunSettings:
+    return RunSettings(
+        population=args.population,
+        generations=generations or args.generations,
+        image_size=args.size,
+        output_size=args.size,
+        seed=seed,
+        shading=True,
+        camera={},  # filled per scene
+    )
+
+
+def _run(scene: Scene, intent: Intent, judge, settings: RunSettings, initial=()):
+    settings.camera = scene.camera.to_dict()
+    if intent.kind == "edit":
+        sess = Session.refine(scene.vol, initial[0], intent.selected, intent.text or "",
+                              judge=judge, settings=settings)  # fmt: skip
+    else:
+        sess = Session.create(scene.vol, intent=intent, judge=judge, settings=settings)
+    firsts, bests = None, None
+    undecided = []
+    while not sess.done:
+        rec = sess.step()
+        best = sess.tfs[rec.best_id]
+        if firsts is None:
+            firsts = best
+        bests = best
+        undecided.append(getattr(rec, "indistinct", None))
+    sess.close()
+    return firsts, bests, undecided
+
+
+_FOOT_CACHE: dict = {}
+
+
+def _foot_reference(args):
+    """The foot rendered with the result of the foot case (metric judge): the reference."""
+    if "ref" not in _FOOT_CACHE:
+        scene = _scene("foot", args)
+        _, best, _ = _run(scene, Intent(kind="text", text=FOOT_TEXT), MetricJudge(),
+                          _settings(args, 0))  # fmt: skip
+        img = scene.image(best)
+        cols = {}
+        for n in ("skin", "bone"):
+            _, lab = visible(scene, best, n)
+            cols[n] = lab if lab is not None else colour_lab("gray")
+        _FOOT_CACHE["ref"] = (img, cols)
+    return _FOOT_CACHE["ref"]
+
+
+def _sketch(scene: Scene, asked: dict) -> tuple[np.ndarray, np.ndarray]:
+    """A base picture of the tooth and strokes across each structure, in its asked colour."""
+    base_tf = default_tf(scene.vol.histogram()[0], scene.vol.value_range)
+    base = scene.image(base_tf)
+    sketch = np.zeros(base.shape[:2] + (4,), np.uint8)
+    for name, (colour, _) in asked.items():
+        mask, _ = visible(scene, base_tf, name)
+        mask = ndimage.binary_erosion(mask, iterations=2)
+        if not mask.any():
+            continue
+        rows = np.nonzero(mask.any(axis=1))[0]
+        r = int(np.median(rows))
+        stroke = np.zeros_like(mask)
+        stroke[max(0, r - 2) : r + 3] = True
+        stroke &= mask
+        sketch[stroke, :3] = NAMED_COLOURS[colour]
+        sketch[stroke, 3] = 255
+    return base, sketch
+
+
+def run_case(case: Case, judge_kind: str, args, seed: int) -> dict:
+    t0 = time.perf_counter()
+    scene = _scene(case.volume, args)
+    asked = dict(case.asked)
+    if case.intent == "reference":
+        ref_img, cols = _foot_reference(args)
+        intent = Intent(kind="image", reference=ref_img)
+        asked = {"skin": (cols["skin"], "faint"), "bone": (cols["bone"], "opaque")}
+    elif case.intent == "sketch":
+        base, sketch = _sketch(scene, asked)
+        intent = Intent(kind="sketch", sketch=sketch, base=base)
+    elif case.name == "refine-pot":
+        return run_refine(scene, judge_kind, args, seed)
+    else:
+        intent = Intent(kind="text", text=case.intent)
+    judge = MetricJudge() if judge_kind == "metric" else label_oracle(scene, asked, 0.1, seed)
+    first, best, undecided = _run(scene, intent, judge, _settings(args, seed))
+    _save(args, f"{case.name}-{judge_kind}-{seed}", scene, first, best)
+    return {
+        "case": case.name,
+        "judge": judge_kind,
+        "seed": seed,
+        "gen0": measure(scene, first, asked),
+        "final": measure(scene, best, asked),
+        "indistinct": undecided,
+        "seconds": time.perf_counter() - t0,
+    }
+
+
+def _save(args, stem: str, scene: Scene, first, best) -> None:
+    if args.pictures is None:
+        return
+    from PIL import Image
+
+    args.pictures.mkdir(parents=True, exist_ok=True)
+    row = np.concatenate([scene.image(first), scene.image(best)], axis=1)
+    Image.fromarray(row).save(args.pictures / f"{stem}.png")
+
+
+def run_refine(scene: Scene, judge_kind: str, args, seed: int) -> dict:
+    """The bonsai's best, then "transparent" on the Gaussians that show its pot."""
+    t0 = time.perf_counter()
+    bonsai = next(c for c in CASES if c.name == "bonsai")
+    judge = (
+        MetricJudge() if judge_kind == "metric" else label_oracle(scene, bonsai.asked, 0.1, seed)
+    )
+    _, base_tf, _ = _run(scene, Intent(kind="text", text=bonsai.intent), judge,
+                         _settings(args, seed))  # fmt: skip
+    pot_vals = scene.vol.data[scene.lab == scene.ids["pot"]]
+    lo, hi = np.percentile(pot_vals, [5, 95])
+    sel = tuple(i for i, g in enumerate(base_tf.gaussians)
+                if lo - g.width <= g.mean <= hi + g.width and g.height > 0)  # fmt: skip
+    if not sel:
+        return {"case": "refine-pot", "judge": judge_kind, "seed": seed, "skipped":
+                "no Gaussian of the base shows the pot"}  # fmt: skip
+    intent = Intent(kind="edit", text="transparent", selected=sel)
+    settings = _settings(args, seed, generations=max(2, args.generations // 2))
+    rj = MetricJudge() if judge_kind == "metric" else _refine_oracle(scene, base_tf, seed)
+    first, best, undecided = _run(scene, intent, rj, settings, initial=[base_tf])
+    _save(args, f"refine-pot-{judge_kind}-{seed}", scene, base_tf, best)
+    before_alpha = _pot_opacity(scene, base_tf)
+    res = {}
+    for key, tf in (("gen0", first), ("final", best)):
+        after = _pot_opacity(scene, tf)
+        mask_b, _ = visible(scene, base_tf, "pot")
+        mask_a, _ = visible(scene, tf, "pot")
+        outside = ~(mask_b | mask_a)
+        de = deltaE_ciede2000(_lab(scene.image(base_tf))[outside], _lab(scene.image(tf))[outside])
+        res[key] = {"pot_opacity_before": before_alpha, "pot_opacity_after": after,
+                    "ratio": after / max(before_alpha, 1e-6),
+                    "dE_outside": float(de.mean()) if de.size else 0.0}  # fmt: skip
+    return {"case": "refine-pot", "judge": judge_kind, "seed": seed, **res,
+            "indistinct": undecided, "seconds": time.perf_counter() - t0}  # fmt: skip
+
+
+def _pot_opacity(scene: Scene, tf) -> float:
+    return voxel_opacity(scene, tf, "pot")
+
+
+def _refine_oracle(scene: Scene, base_tf, seed: int) -> OracleJudge:
+    """Prefers a fainter pot with the rest unchanged (from the picture alone)."""
+    base = _lab(scene.image(base_tf))
+    mask, _ = visible(scene, base_tf, "pot")
+
+    def score(img):
+        lab = _lab(img)
+        inside = float(lab[mask][:, 0].mean()) if mask.any() else 0.0
+        outside = float(np.linalg.norm(lab[~mask] - base[~mask], axis=1).mean())
+        return -inside - 3.0 * outside
+
+    return OracleJudge(score, noise=0.1, seed=seed)
+
+
+# -- table ---------------------------------------------------------------------------------------
+
+
+def summarise(rows: list[dict]) -> str:
+    lines = [
+        f"{'case':14s} {'judge':6s} {'structure':13s} {'dE gen0':>8s} {'dE final':>8s} "
+        f"{'opacity':>8s} {'ok':>3s} {'haze0':>6s} {'haze':>6s}"
+    ]
+    for r in rows:
+        if "skipped" in r:
+            lines.append(f"{r['case']:14s} {r['judge']:6s} skipped: {r['skipped']}")
+            continue
+        if r["case"] == "refine-pot":
+            f, g = r["final"], r["gen0"]
+            lines.append(
+                f"{'refine-pot':14s} {r['judge']:6s} {'pot':13s} opacity {f['pot_opacity_before']:.3f}"
+                f" -> gen0 {g['pot_opacity_after']:.3f} final {f['pot_opacity_after']:.3f}"
+                f" (ratio {f['ratio']:.2f}), dE outside {f['dE_outside']:.2f}"
+            )
+            continue
+        for name, s in r["final"]["structures"].items():
+            g = r["gen0"]["structures"][name]
+            lines.append(
+                f"{r['case']:14s} {r['judge']:6s} {name:13s} {g['dE']:8.1f} {s['dE']:8.1f} "
+                f"{s['opacity']:8.3f} {'y' if s['opacity_ok'] else 'n':>3s} "
+                f"{100 * r['gen0']['haze']:5.1f}% {100 * r['final']['haze']:5.1f}%"
+            )
+        ind = [x for x in r.get("indistinct", []) if x]
+        if ind:
+            lines.append(f"{'':14s} {'':6s} generations the judge could not tell apart: {len(ind)}")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--cases", default=",".join(c.name for c in CASES))
+    ap.add_argument("--judge", choices=["metric", "oracle", "both"], default="both")
+    ap.add_argument("--population", type=int, default=16)
+    ap.add_argument("--generations", type=int, default=6)
+    ap.add_argument("--size", type=int, default=128)
+    ap.add_argument("--max-dim", type=int, default=96)
+    ap.add_argument("--seeds", type=int, default=1)
+    ap.add_argument("--quick", action="store_true", help="population 8, 2 generations, 64 px")
+    ap.add_argument("--json", type=Path, default=None, help="write the rows here")
+    ap.add_argument(
+        "--pictures",
+        type=Path,
+        default=None,
+        help="write each case's best pictures (generation 0 | final) here",
+    )
+    ap.add_argument("--slices", type=Path, default=None, help="write label slices (PNG) here")
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.population, args.generations, args.size, args.max_dim = 8, 2, 64, 64
+    if args.slices:
+        write_slices(args)
+        return 0
+    judges = ["metric", "oracle"] if args.judge == "both" else [args.judge]
+    wanted = args.cases.split(",")
+    rows = []
+    for case in CASES:
+        if case.name not in wanted:
+            continue
+        for jk in judges:
+            for seed in range(args.seeds):
+                r = run_case(case, jk, args, seed)
+                rows.append(r)
+                print(summarise([r]), flush=True)
+    print()
+    print(summarise(rows))
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1, default=float))
+    return 0
+
+
+def write_slices(args) -> None:
+    """Middle slices of each label volume, coloured by label, for checking by eye."""
+    from PIL import Image
+
+    pal = np.array([[0, 0, 0], [230, 60, 60], [60, 200, 60], [60, 90, 240], [240, 200, 40]])
+    args.slices.mkdir(parents=True, exist_ok=True)
+    for name in FILES:
+        vol = load_volume(DATA / FILES[name], max_dim=args.max_dim)
+        lab, _, _ = labels_for(name, vol.data)
+        z, y, x = lab.shape
+        parts = [lab[z // 2], lab[:, y // 2][::-1], lab[:, :, x // 2][::-1]]
+        h = max(p.shape[0] for p in parts)
+        row = np.concatenate([np.pad(p, ((0, h - p.shape[0]), (0, 2))) for p in parts], 1)
+        Image.fromarray(pal[row % len(pal)].astype(np.uint8)).save(args.slices / f"{name}.png")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
