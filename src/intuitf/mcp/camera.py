@@ -83,9 +83,7 @@ def from_vtk(d: dict, extent: tuple[float, float, float]) -> Camera:
     """The Camera for a VTK-style camera (see the module notes)."""
     projection = d.get("projection", "parallel" if "parallel_scale" in d else "perspective")
     if projection not in ("perspective", "parallel", "orthographic"):
-        raise RenderError(
-            f"Camera projection must be perspective or parallel, got {projection!r}."
-        )
+        raise RenderError(f"Camera projection must be perspective or parallel, got {projection!r}.")
     position = _vector(d.get("position"), "position")
     ext = np.asarray(extent, dtype=np.float64)
     center = ext / 2.0
@@ -161,7 +159,9 @@ def to_vtk(camera: Camera, extent: tuple[float, float, float]) -> dict[str, Any]
         half_seen = frame.distance * half  # world half height at the box centre
     else:
         half_seen = half
-    focal = frame.center - 2.0 * half_seen * (camera.pan[0] * frame.right + camera.pan[1] * frame.up)
+    focal = frame.center - 2.0 * half_seen * (
+        camera.pan[0] * frame.right + camera.pan[1] * frame.up
+    )
     position = focal - frame.forward * frame.distance
     out: dict[str, Any] = {
         "position": [round(float(v), 6) for v in position],

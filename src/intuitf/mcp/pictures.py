@@ -146,9 +146,7 @@ def side_by_side(images: list[np.ndarray], gap: int = 4, fill: int = 40) -> np.n
 def outline(image: np.ndarray, mask: np.ndarray, color=(255, 220, 0)) -> np.ndarray:
     """``image`` with the border of ``mask`` drawn over it (a picked feature's outline)."""
     m = mask.astype(bool)
-    edge = m & ~(
-        np.roll(m, 1, 0) & np.roll(m, -1, 0) & np.roll(m, 1, 1) & np.roll(m, -1, 1)
-    )
+    edge = m & ~(np.roll(m, 1, 0) & np.roll(m, -1, 0) & np.roll(m, 1, 1) & np.roll(m, -1, 1))
     out = image[..., :3].copy()
     out[edge] = color
     return out

@@ -55,7 +55,7 @@ class Roots:
         """``path`` resolved (relative to the output folder), if it lies under it; its folder
         is created."""
         p = self._inside(path, [self.out], what, base=self.out)
-        if p == self.out or p.is_dir():
+        if p == self.out or p.is_dir() or str(path).rstrip().endswith(("/", ".")):
             raise PathRefused(
                 f"{_shown(path)!r} is a folder, not a file to write.",
                 "Give a file name, e.g. exports/foot-bone.vp.",

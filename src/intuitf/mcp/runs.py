@@ -118,7 +118,9 @@ class RunDesk:
         elif isinstance(judge, dict):
             data = dict(judge)
         else:
-            raise SessionError("A judge is a spec string (metric, openai:MODEL, a URL) or an object.")
+            raise SessionError(
+                "A judge is a spec string (metric, openai:MODEL, a URL) or an object."
+            )
         if budget_usd is not None:
             data["budget_usd"] = budget_usd
         if budget_calls is not None:
@@ -228,6 +230,7 @@ class RunDesk:
         self.check_run(name)
         info = self.store.run(name)
         live = self._live(name)
+        closing = live is None and self.registry.entry(name) is not None
         if live is not None:
             progress = live.progress.to_dict()
             events = live.session.events.since(int(since))
@@ -245,7 +248,7 @@ class RunDesk:
             {
                 "run": name,
                 "live": live is not None,
-                "status": progress.get("status", info.status),
+                "status": "finishing" if closing else progress.get("status", info.status),
                 "progress": progress,
                 "info": _info(info),
                 "events": [_event(e) for e in shown],
@@ -260,6 +263,7 @@ class RunDesk:
         timeout = max(0.0, min(float(timeout_s), MAX_WAIT))
         live = self._live(name)
         outcome = "not_running"
+        ended = []
         if live is not None:
             events = live.session.events
             start = events.last_seq if since is None else int(since)
@@ -268,6 +272,8 @@ class RunDesk:
 
             def on_event(e) -> None:
                 if e.seq > start and e.type in ("generation_ended", "run_ended"):
+                    if e.type == "run_ended":
+                        ended.append(True)
                     loop.call_soon_threadsafe(done.set)
 
             unsubscribe = events.subscribe(on_event, since=start)
@@ -281,6 +287,10 @@ class RunDesk:
             since_out = start
         else:
             since_out = int(since or 0)
+        # A run that ended is still writing its outputs until it releases its folder.
+        entry = self.registry.entry(name)
+        if entry is not None and (live is None or ended or not entry.live):
+            await entry.wait_closed(max(timeout, 5.0))
         reply = await asyncio.to_thread(self.status, name, since_out, 50)
         ended = [e for e in reply.data["events"] if e["type"] == "run_ended"]
         if ended:
@@ -533,8 +543,7 @@ class RunDesk:
         data = {
             "candidate": info.qid,
             "features": [
-                {"index": i, **g.to_dict(),
-                 "value": round(float(vol.to_original(g.mean)), 4)}
+                {"index": i, **g.to_dict(), "value": round(float(vol.to_original(g.mean)), 4)}
                 for i, g in enumerate(tf.gaussians)
             ],  # fmt: skip
             "selected": self.selections.get(info.qid, []),
@@ -714,7 +723,9 @@ def _best_from_folder(store, name: str, k: int) -> list[tuple[str, float | None]
     ranking, ratings, tfs = ckpt.get("ranking", []), ckpt.get("ratings", {}), ckpt.get("tfs", {})
     if not ranking:
         gens = rd.generations()
-        cands = sorted(gens[-1].get("candidates", []), key=lambda c: c.get("rank", 0)) if gens else []
+        cands = (
+            sorted(gens[-1].get("candidates", []), key=lambda c: c.get("rank", 0)) if gens else []
+        )
         ranking = [c["id"] for c in cands]
         ratings = {c["id"]: c.get("rating") for c in cands}
         tfs = {c["id"]: c.get("tf") for c in cands}

@@ -12,7 +12,7 @@ from contextlib import asynccontextmanager
 from mcp.server.mcpserver import MCPServer
 
 from intuitf.mcp.service import McpConfig, McpService
-from intuitf.mcp.tools import Results, register
+from intuitf.mcp.tools import Results, forbid_unknown_arguments, register
 
 INSTRUCTIONS = """\
 intuitf finds transfer functions (TFs) for direct volume rendering from what you want.
@@ -53,6 +53,7 @@ def build_server(config: McpConfig) -> tuple[MCPServer, McpService]:
         log_level="WARNING",
     )
     register(server, service, results)
+    forbid_unknown_arguments(server)
     return server, service
 
 

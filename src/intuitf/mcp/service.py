@@ -142,7 +142,9 @@ class McpService:
         n = len(tf)
         if changes.pop("remove", False):
             if not 0 <= index < n:
-                raise TransferFunctionError(f"The TF has Gaussians 0 to {n - 1}; there is no {index}.")
+                raise TransferFunctionError(
+                    f"The TF has Gaussians 0 to {n - 1}; there is no {index}."
+                )
             if n == 1:
                 raise TransferFunctionError("A TF keeps at least one Gaussian.")
             gs = [g for i, g in enumerate(tf.gaussians) if i != index]
@@ -153,7 +155,10 @@ class McpService:
                     f"A new Gaussian needs {', '.join(missing)}.",
                     "Give mean, width, height (in [0, 1]) and color [r, g, b].",
                 )
-            gs = [*tf.gaussians, Gaussian(**{k: changes[k] for k in ("mean", "width", "height", "color")})]
+            gs = [
+                *tf.gaussians,
+                Gaussian(**{k: changes[k] for k in ("mean", "width", "height", "color")}),
+            ]
         elif 0 <= index < n:
             g = tf.gaussians[index].to_dict()
             g.update({k: v for k, v in changes.items() if v is not None})
@@ -281,9 +286,9 @@ class McpService:
         vol = await asyncio.to_thread(self.shelf.volume, ov)
         stem = (qid or ov.id).replace("/", "-")
         target = path or f"{stem}{EXPORT_SUFFIXES[fmt]}"
-        if not Path(target).suffix:  # a bare name gets the format's suffix
-            target = f"{target}{EXPORT_SUFFIXES[fmt]}"
         out = self.roots.writable(target, "export file")
+        if not out.suffix:  # a bare name gets the format's suffix
+            out = self.roots.writable(out.with_name(out.name + EXPORT_SUFFIXES[fmt]))
         t = replace(t.unfreeze(), value_range=vol.value_range, name=t.name or stem)
         unit = min(vol.spacing)  # heights are opacity per voxel
         data: dict[str, Any] = {"format": fmt, "candidate": qid, "volume": ov.id}
@@ -306,14 +311,14 @@ class McpService:
         elif fmt == "json":
             from intuitf.fileio import atomic_write_text
 
-            await asyncio.to_thread(atomic_write_text, out, t.to_json(), error=TransferFunctionError)
+            await asyncio.to_thread(
+                atomic_write_text, out, t.to_json(), error=TransferFunctionError
+            )
         else:
             from intuitf.tf.export_io import write_export
 
             name = "1dt" if fmt == "imagevis3d" else fmt
-            await asyncio.to_thread(
-                write_export, t, name, out, vol.value_range, unit_distance=unit
-            )
+            await asyncio.to_thread(write_export, t, name, out, vol.value_range, unit_distance=unit)
         data.update(
             path=str(out),
             bytes=out.stat().st_size,
@@ -347,6 +352,10 @@ def parse_tf(value: Any) -> GaussianTF:
             raise TransferFunctionError(f"The TF is not valid JSON: {exc}.") from None
     if isinstance(value, list):
         value = {"gaussians": value}
+    if isinstance(value, dict):  # an agent need not write the file format's marker
+        from intuitf.tf.gaussian import TF_FORMAT, TF_VERSION
+
+        value = {"format": TF_FORMAT, "version": TF_VERSION, **value}
     if not isinstance(value, dict):
         raise TransferFunctionError(
             f"A TF is a JSON object with 'gaussians', got {type(value).__name__}.",

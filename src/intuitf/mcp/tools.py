@@ -38,9 +38,9 @@ Camera = Annotated[
 ]
 Size = Annotated[int, Field(description="Picture size in pixels per side (16-1024).")]
 TF = Annotated[
-    dict[str, Any] | list[dict[str, Any]] | None,
+    dict[str, Any] | list[dict[str, Any]] | str | None,
     Field(
-        description='Transfer function as Gaussians over the normalised value range [0, 1]: '
+        description="Transfer function as Gaussians over the normalised value range [0, 1]: "
         '{"gaussians": [{"mean": 0.6, "width": 0.03, "height": 0.5, "color": [1, 0.9, 0.8]}]} '
         "(height = opacity per voxel, 1-16 Gaussians); a bare list of Gaussians also works."
     ),
@@ -100,7 +100,9 @@ class Results:
                              "full_size": [int(first.image.shape[1]), int(first.image.shape[0])]}  # fmt: skip
         text = self.scrub(json.dumps(data, default=_plain))
         content: list[Any] = [TextContent(type="text", text=text)]
-        content += [ImageContent(type="image", data=e.base64, mime_type=e.mime_type) for e in encoded]
+        content += [
+            ImageContent(type="image", data=e.base64, mime_type=e.mime_type) for e in encoded
+        ]
         return CallToolResult(content=content, structured_content=json.loads(text))
 
     async def run(self, call: Callable[[], Awaitable[Reply] | Reply], fmt: str = "auto"):
@@ -139,6 +141,17 @@ def _plain(o: Any) -> Any:
     return str(o)
 
 
+def forbid_unknown_arguments(server: MCPServer) -> None:
+    """Make a misspelt argument an error instead of being ignored (and say so in the schemas,
+    with ``additionalProperties: false``)."""
+    manager = getattr(server, "_tool_manager", None)
+    for tool in manager.list_tools() if manager is not None else []:
+        model = tool.fn_metadata.arg_model
+        model.model_config["extra"] = "forbid"
+        model.model_rebuild(force=True)
+        tool.parameters = model.model_json_schema(by_alias=True)
+
+
 def register(server: MCPServer, svc: McpService, results: Results) -> None:
     """Add every intuitf tool to ``server``."""
     answer = results.run
@@ -153,12 +166,27 @@ def register(server: MCPServer, svc: McpService, results: Results) -> None:
 
     @server.tool(annotations=READ)
     async def open_volume(
-        path: Annotated[str, Field(description="Volume file under a data folder (from list_volumes), or 'phantom'.")],
-        shape: Annotated[list[int] | None, Field(description="Raw files: grid size [X, Y, Z] (when the name does not say it).")] = None,
-        dtype: Annotated[str | None, Field(description="Raw files: uint8, uint16, int16, float32, ...")] = None,
-        byte_order: Annotated[Literal["little", "big"] | None, Field(description="Raw files: byte order.")] = None,
-        spacing: Annotated[list[float] | None, Field(description="Voxel size [x, y, z] (overrides the file's).")] = None,
-        max_dim: Annotated[int | None, Field(description="Downsample to at most this many voxels per axis (faster).")] = None,
+        path: Annotated[
+            str,
+            Field(description="Volume file under a data folder (from list_volumes), or 'phantom'."),
+        ],
+        shape: Annotated[
+            list[int] | None,
+            Field(description="Raw files: grid size [X, Y, Z] (when the name does not say it)."),
+        ] = None,
+        dtype: Annotated[
+            str | None, Field(description="Raw files: uint8, uint16, int16, float32, ...")
+        ] = None,
+        byte_order: Annotated[
+            Literal["little", "big"] | None, Field(description="Raw files: byte order.")
+        ] = None,
+        spacing: Annotated[
+            list[float] | None, Field(description="Voxel size [x, y, z] (overrides the file's).")
+        ] = None,
+        max_dim: Annotated[
+            int | None,
+            Field(description="Downsample to at most this many voxels per axis (faster)."),
+        ] = None,
     ) -> CallToolResult:
         """Open a volume and describe it; returns its id for the other tools. Opening the same
         file with the same options again returns the same id."""  # fmt: skip
@@ -178,28 +206,51 @@ def register(server: MCPServer, svc: McpService, results: Results) -> None:
     # -- pictures -----------------------------------------------------------------------
     @server.tool(annotations=READ)
     async def render(
-        volume: Annotated[str | None, Field(description="Volume id (renders its current TF unless tf is given).")] = None,
-        candidate: Annotated[str | None, Field(description="Or a candidate id RUN/gGGG-NNN: renders it on its run's volume.")] = None,
+        volume: Annotated[
+            str | None, Field(description="Volume id (renders its current TF unless tf is given).")
+        ] = None,
+        candidate: Annotated[
+            str | None,
+            Field(description="Or a candidate id RUN/gGGG-NNN: renders it on its run's volume."),
+        ] = None,
         tf: TF = None,
         camera: Camera = None,
         size: Size = 512,
-        shaded: Annotated[bool | None, Field(description="Gradient shading (default on, or the run's setting).")] = None,
-        background: Annotated[list[float] | None, Field(description="Background [r, g, b] in [0, 1].")] = None,
-        format: Annotated[Literal["auto", "png", "jpeg"], Field(description="Image format sent back.")] = "auto",
+        shaded: Annotated[
+            bool | None, Field(description="Gradient shading (default on, or the run's setting).")
+        ] = None,
+        background: Annotated[
+            list[float] | None, Field(description="Background [r, g, b] in [0, 1].")
+        ] = None,
+        format: Annotated[
+            Literal["auto", "png", "jpeg"], Field(description="Image format sent back.")
+        ] = "auto",
     ) -> CallToolResult:
         """Render a volume with a transfer function (or a run's candidate) from a camera. Returns
         the picture as an image, the camera in both forms, and the full-size PNG's path."""  # fmt: skip
         return await answer(
-            lambda: svc.render(volume_id=volume, candidate=candidate, tf=tf, camera=camera,
-                               size=size, shaded=shaded, background=background),  # fmt: skip
+            lambda: svc.render(
+                volume_id=volume,
+                candidate=candidate,
+                tf=tf,
+                camera=camera,
+                size=size,
+                shaded=shaded,
+                background=background,
+            ),  # fmt: skip
             format,
         )
 
     # -- transfer functions --------------------------------------------------------------
     @server.tool(annotations=READ)
     async def get_tf(
-        volume: Annotated[str | None, Field(description="Volume id: its current TF (a histogram-aware default at first).")] = None,
-        candidate: Annotated[str | None, Field(description="Or a candidate id RUN/gGGG-NNN.")] = None,
+        volume: Annotated[
+            str | None,
+            Field(description="Volume id: its current TF (a histogram-aware default at first)."),
+        ] = None,
+        candidate: Annotated[
+            str | None, Field(description="Or a candidate id RUN/gGGG-NNN.")
+        ] = None,
     ) -> CallToolResult:
         """Get a transfer function as Gaussians (JSON)."""  # fmt: skip
         return await answer(lambda: _thread(svc.get_tf, volume, candidate))
@@ -216,9 +267,15 @@ def register(server: MCPServer, svc: McpService, results: Results) -> None:
     @server.tool(annotations=WRITE)
     async def edit_gaussian(
         volume: Annotated[str, Field(description="Volume id.")],
-        index: Annotated[int, Field(description="0-based Gaussian to change; the count adds a new one.")],
-        mean: Annotated[float | None, Field(description="Centre in [0, 1] (normalised value).")] = None,
-        width: Annotated[float | None, Field(description="Standard deviation in [0.002, 0.5].")] = None,
+        index: Annotated[
+            int, Field(description="0-based Gaussian to change; the count adds a new one.")
+        ],
+        mean: Annotated[
+            float | None, Field(description="Centre in [0, 1] (normalised value).")
+        ] = None,
+        width: Annotated[
+            float | None, Field(description="Standard deviation in [0.002, 0.5].")
+        ] = None,
         height: Annotated[float | None, Field(description="Opacity per voxel in [0, 1].")] = None,
         color: Annotated[list[float] | None, Field(description="[r, g, b] in [0, 1].")] = None,
         remove: Annotated[bool, Field(description="Remove this Gaussian instead.")] = False,
@@ -233,19 +290,39 @@ def register(server: MCPServer, svc: McpService, results: Results) -> None:
         volume: Annotated[str, Field(description="Volume id from open_volume.")],
         intent: Intent = None,
         judge: Judge = None,
-        budget_usd: Annotated[float | None, Field(ge=0, description="Most money the run's model judge may spend.")] = None,
-        budget_calls: Annotated[int | None, Field(ge=0, description="Most model calls the run may make.")] = None,
-        settings: Annotated[dict[str, Any] | None, Field(description="Run settings: population (4-1000, default 32), generations (default 12), n_gaussians, seed, image_size (judged pictures, 32-2048), shading, background, camera (orbit form), stages, explorer.")] = None,
-        start_from_tf: Annotated[bool, Field(description="Put the volume's current TF into the first population.")] = False,
-        name: Annotated[str | None, Field(description="Base of the run's name (default: the volume id).")] = None,
+        budget_usd: Annotated[
+            float | None, Field(ge=0, description="Most money the run's model judge may spend.")
+        ] = None,
+        budget_calls: Annotated[
+            int | None, Field(ge=0, description="Most model calls the run may make.")
+        ] = None,
+        settings: Annotated[
+            dict[str, Any] | None,
+            Field(
+                description="Run settings: population (4-1000, default 32), generations (default 12), n_gaussians, seed, image_size (judged pictures, 32-2048), shading, background, camera (orbit form), stages, explorer."
+            ),
+        ] = None,
+        start_from_tf: Annotated[
+            bool, Field(description="Put the volume's current TF into the first population.")
+        ] = False,
+        name: Annotated[
+            str | None, Field(description="Base of the run's name (default: the volume id).")
+        ] = None,
     ) -> CallToolResult:
         """Start a search for a transfer function that shows what the intent asks for. Returns
         the run's name at once; the run goes on in the background (follow it with run_status or
         wait_for_generation, see results with gallery)."""  # fmt: skip
         return await answer(
-            lambda: desk.start(volume_id=volume, intent=intent, judge=judge, budget_usd=budget_usd,
-                               budget_calls=budget_calls, settings=settings,
-                               start_from_tf=start_from_tf, name=name)  # fmt: skip
+            lambda: desk.start(
+                volume_id=volume,
+                intent=intent,
+                judge=judge,
+                budget_usd=budget_usd,
+                budget_calls=budget_calls,
+                settings=settings,
+                start_from_tf=start_from_tf,
+                name=name,
+            )  # fmt: skip
         )
 
     @server.tool(annotations=READ)
@@ -256,7 +333,13 @@ def register(server: MCPServer, svc: McpService, results: Results) -> None:
     @server.tool(annotations=READ)
     async def run_status(
         run: RunName,
-        since: Annotated[int, Field(ge=0, description="Return events after this sequence number (next_since of the last call).")] = 0,
+        since: Annotated[
+            int,
+            Field(
+                ge=0,
+                description="Return events after this sequence number (next_since of the last call).",
+            ),
+        ] = 0,
         limit: Annotated[int, Field(ge=1, le=500, description="Most events to return.")] = 50,
     ) -> CallToolResult:
         """A run's progress (stage, generation, matches, calls, cost, time left) and its events
@@ -266,8 +349,15 @@ def register(server: MCPServer, svc: McpService, results: Results) -> None:
     @server.tool(annotations=READ)
     async def wait_for_generation(
         run: RunName,
-        timeout_s: Annotated[float, Field(ge=0, le=300, description="Longest wait in seconds.")] = 30.0,
-        since: Annotated[int | None, Field(description="Wait for a generation ending after this event number (default: now).")] = None,
+        timeout_s: Annotated[
+            float, Field(ge=0, le=300, description="Longest wait in seconds.")
+        ] = 30.0,
+        since: Annotated[
+            int | None,
+            Field(
+                description="Wait for a generation ending after this event number (default: now)."
+            ),
+        ] = None,
     ) -> CallToolResult:
         """Wait until the run's next generation ends (or the run ends, or the timeout passes);
         returns its status and the events meanwhile. Other tools keep working while it waits."""  # fmt: skip
@@ -281,9 +371,15 @@ def register(server: MCPServer, svc: McpService, results: Results) -> None:
     @server.tool(annotations=WRITE)
     async def continue_run(
         run: RunName,
-        budget_usd: Annotated[float | None, Field(ge=0, description="A new money budget for the whole run.")] = None,
-        budget_calls: Annotated[int | None, Field(ge=0, description="A new call budget for the whole run.")] = None,
-        judge: Annotated[str | None, Field(description="Move the run to another judge (spec string).")] = None,
+        budget_usd: Annotated[
+            float | None, Field(ge=0, description="A new money budget for the whole run.")
+        ] = None,
+        budget_calls: Annotated[
+            int | None, Field(ge=0, description="A new call budget for the whole run.")
+        ] = None,
+        judge: Annotated[
+            str | None, Field(description="Move the run to another judge (spec string).")
+        ] = None,
     ) -> CallToolResult:
         """Let a paused run go on, or continue a stopped one (cancelled, out of budget) from its
         last checkpoint; nothing paid for is asked again."""  # fmt: skip
@@ -299,7 +395,9 @@ def register(server: MCPServer, svc: McpService, results: Results) -> None:
         run: RunName,
         k: Annotated[int, Field(ge=1, le=16, description="How many of the best to show.")] = 4,
         size: Annotated[int, Field(ge=16, le=512, description="Size of each rendering.")] = 192,
-        pictures: Annotated[bool, Field(description="Send a contact sheet of the renderings.")] = True,
+        pictures: Annotated[
+            bool, Field(description="Send a contact sheet of the renderings.")
+        ] = True,
     ) -> CallToolResult:
         """The run's best distinct candidates of its last judged generation: ids, ranks, ratings,
         what the judge said about each (against whom, won, reasons), and a contact sheet."""  # fmt: skip
@@ -308,7 +406,9 @@ def register(server: MCPServer, svc: McpService, results: Results) -> None:
     @server.tool(annotations=WRITE)
     async def prefer(
         run: RunName,
-        better: Annotated[str, Field(description="Candidate id (gGGG-NNN or RUN/gGGG-NNN) that is better.")],
+        better: Annotated[
+            str, Field(description="Candidate id (gGGG-NNN or RUN/gGGG-NNN) that is better.")
+        ],
         worse: Annotated[str, Field(description="Candidate id that is worse.")],
         note: Annotated[str, Field(description="Why (kept in the journal).")] = "",
     ) -> CallToolResult:
@@ -321,7 +421,9 @@ def register(server: MCPServer, svc: McpService, results: Results) -> None:
     async def choose_best(
         run: RunName,
         best: Annotated[str, Field(description="The best candidate's id.")],
-        among: Annotated[list[str], Field(min_length=2, description="The candidates it was chosen from (ids).")],
+        among: Annotated[
+            list[str], Field(min_length=2, description="The candidates it was chosen from (ids).")
+        ],
         note: Annotated[str, Field(description="Why.")] = "",
     ) -> CallToolResult:
         """Say which candidate is the best of several (e.g. of the gallery)."""  # fmt: skip
@@ -331,7 +433,9 @@ def register(server: MCPServer, svc: McpService, results: Results) -> None:
     @server.tool(annotations=WRITE)
     async def undo_verdict(
         run: RunName,
-        verdict_id: Annotated[int | None, Field(description="Which verdict (default: the last).")] = None,
+        verdict_id: Annotated[
+            int | None, Field(description="Which verdict (default: the last).")
+        ] = None,
     ) -> CallToolResult:
         """Take back a verdict given with prefer or choose_best."""  # fmt: skip
         return await answer(lambda: desk.human(run, lambda s: s.undo_verdict(verdict_id)))
@@ -340,38 +444,64 @@ def register(server: MCPServer, svc: McpService, results: Results) -> None:
     async def features(
         candidate: CandidateId,
         camera: Camera = None,
-        size: Annotated[int, Field(ge=16, le=512, description="Size of each feature's picture.")] = 160,
+        size: Annotated[
+            int, Field(ge=16, le=512, description="Size of each feature's picture.")
+        ] = 160,
         shaded: bool | None = None,
     ) -> CallToolResult:
         """Each Gaussian (feature) of a candidate rendered alone, with its parameters, to select
         features by index."""  # fmt: skip
-        return await answer(lambda: desk.features(candidate, camera=camera, size=size, shaded=shaded))
+        return await answer(
+            lambda: desk.features(candidate, camera=camera, size=size, shaded=shaded)
+        )
 
     @server.tool(annotations=WRITE)
     async def select_feature(
         candidate: CandidateId,
-        x: Annotated[int | None, Field(description="Pixel column from the left of the candidate's picture at `size`.")] = None,
+        x: Annotated[
+            int | None,
+            Field(description="Pixel column from the left of the candidate's picture at `size`."),
+        ] = None,
         y: Annotated[int | None, Field(description="Pixel row from the top.")] = None,
-        index: Annotated[int | None, Field(description="Or the feature's (Gaussian's) index.")] = None,
+        index: Annotated[
+            int | None, Field(description="Or the feature's (Gaussian's) index.")
+        ] = None,
         camera: Camera = None,
         size: Size = 512,
         shaded: bool | None = None,
-        clear: Annotated[bool, Field(description="Clear this candidate's selection first.")] = False,
+        clear: Annotated[
+            bool, Field(description="Clear this candidate's selection first.")
+        ] = False,
     ) -> CallToolResult:
         """Select a feature of a candidate: at a pixel, the visible feature with the smallest
         projected area (the paper's rule), or by index. Selections add up per candidate; refine
         changes the selected ones. Shows the pick outlined and the feature alone."""  # fmt: skip
         return await answer(
-            lambda: desk.select(candidate, x=x, y=y, index=index, camera=camera, size=size,
-                                shaded=shaded, clear=clear)  # fmt: skip
+            lambda: desk.select(
+                candidate,
+                x=x,
+                y=y,
+                index=index,
+                camera=camera,
+                size=size,
+                shaded=shaded,
+                clear=clear,
+            )  # fmt: skip
         )
 
     @server.tool(annotations=WRITE)
     async def refine(
         candidate: CandidateId,
-        text: Annotated[str, Field(description="How the selected features should change, in words.")],
-        selected: Annotated[list[int] | None, Field(description="Gaussian indices (default: those chosen with select_feature).")] = None,
-        generations: Annotated[int | None, Field(ge=1, le=1000, description="Generations of the refinement.")] = None,
+        text: Annotated[
+            str, Field(description="How the selected features should change, in words.")
+        ],
+        selected: Annotated[
+            list[int] | None,
+            Field(description="Gaussian indices (default: those chosen with select_feature)."),
+        ] = None,
+        generations: Annotated[
+            int | None, Field(ge=1, le=1000, description="Generations of the refinement.")
+        ] = None,
         judge: Judge = None,
     ) -> CallToolResult:
         """Start a refinement run from a candidate: only the selected features change, toward
@@ -382,7 +512,9 @@ def register(server: MCPServer, svc: McpService, results: Results) -> None:
     async def new_query(
         run: RunName,
         intent: Intent,
-        generations: Annotated[int | None, Field(ge=1, le=1000, description="Generations of the new stage.")] = None,
+        generations: Annotated[
+            int | None, Field(ge=1, le=1000, description="Generations of the new stage.")
+        ] = None,
     ) -> CallToolResult:
         """Ask a run something new (words, a reference or a sketch): a new customize stage
         starts after the generation in progress, keeping the run's history."""  # fmt: skip
@@ -391,9 +523,17 @@ def register(server: MCPServer, svc: McpService, results: Results) -> None:
     @server.tool(annotations=WRITE)
     async def branch(
         run: RunName,
-        generation: Annotated[int | None, Field(ge=0, description="Start where the run was after this generation.")] = None,
-        candidate: Annotated[str | None, Field(description="Or start from this candidate (it joins a fresh first population).")] = None,
-        changes: Annotated[dict[str, Any] | None, Field(description="Changes to the run's spec: intent, judge and/or settings.")] = None,
+        generation: Annotated[
+            int | None, Field(ge=0, description="Start where the run was after this generation.")
+        ] = None,
+        candidate: Annotated[
+            str | None,
+            Field(description="Or start from this candidate (it joins a fresh first population)."),
+        ] = None,
+        changes: Annotated[
+            dict[str, Any] | None,
+            Field(description="Changes to the run's spec: intent, judge and/or settings."),
+        ] = None,
     ) -> CallToolResult:
         """Start a new run from a generation or a candidate of another, with changes; the
         history keeps the link. Returns the new run's name at once."""  # fmt: skip
@@ -402,10 +542,24 @@ def register(server: MCPServer, svc: McpService, results: Results) -> None:
     # -- exports --------------------------------------------------------------------------
     @server.tool(annotations=WRITE)
     async def export(
-        format: Annotated[Literal["paraview", "slicer", "vtk", "imagevis3d", "1dt", "json", "png"], Field(description="paraview (colour-map preset), slicer (.vp), vtk (Python snippet), imagevis3d (.1dt), json (Gaussians), png (a rendering).")],
-        candidate: Annotated[str | None, Field(description="Candidate id RUN/gGGG-NNN to export.")] = None,
-        volume: Annotated[str | None, Field(description="Or a volume id: export its current TF.")] = None,
-        path: Annotated[str | None, Field(description="File under the output folder (relative paths are taken there); default: a name from the id.")] = None,
+        format: Annotated[
+            Literal["paraview", "slicer", "vtk", "imagevis3d", "1dt", "json", "png"],
+            Field(
+                description="paraview (colour-map preset), slicer (.vp), vtk (Python snippet), imagevis3d (.1dt), json (Gaussians), png (a rendering)."
+            ),
+        ],
+        candidate: Annotated[
+            str | None, Field(description="Candidate id RUN/gGGG-NNN to export.")
+        ] = None,
+        volume: Annotated[
+            str | None, Field(description="Or a volume id: export its current TF.")
+        ] = None,
+        path: Annotated[
+            str | None,
+            Field(
+                description="File under the output folder (relative paths are taken there); default: a name from the id."
+            ),
+        ] = None,
         size: Annotated[int, Field(description="png: picture size.")] = 512,
         camera: Camera = None,
     ) -> CallToolResult:
@@ -413,8 +567,14 @@ def register(server: MCPServer, svc: McpService, results: Results) -> None:
         ImageVis3D, as JSON, or as a PNG rendering, into the output folder; values in the data's
         own units."""  # fmt: skip
         return await answer(
-            lambda: svc.export(volume_id=volume, candidate=candidate, fmt=format, path=path,
-                               size=size, camera=camera)  # fmt: skip
+            lambda: svc.export(
+                volume_id=volume,
+                candidate=candidate,
+                fmt=format,
+                path=path,
+                size=size,
+                camera=camera,
+            )  # fmt: skip
         )
 
 

@@ -96,7 +96,9 @@ class VolumeShelf:
                 continue
             for folder, dirs, names in os.walk(root):
                 depth = len(Path(folder).relative_to(root).parts)
-                dirs[:] = sorted(d for d in dirs if not d.startswith(".")) if depth < SCAN_DEPTH else []
+                dirs[:] = (
+                    sorted(d for d in dirs if not d.startswith(".")) if depth < SCAN_DEPTH else []
+                )
                 for n in sorted(names):
                     if n.startswith(".") or not n.lower().endswith(VOLUME_SUFFIXES):
                         continue
@@ -152,7 +154,11 @@ class VolumeShelf:
             for ov in self._open.values():
                 if ov.key() == key:
                     return ov
-            base = "phantom" if spec.source in ("phantom", PHANTOM) else _slug(_stem(Path(spec.source).name))
+            base = (
+                "phantom"
+                if spec.source in ("phantom", PHANTOM)
+                else _slug(_stem(Path(spec.source).name))
+            )
             vid, k = base, 1
             while vid in self._open:
                 k += 1
