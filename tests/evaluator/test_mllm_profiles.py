@@ -126,7 +126,7 @@ def test_unsupported_effort_value_is_replaced_by_a_listed_one():
         },
     )
     j = MLLMJudge("gpt-5-pro", provider="openai", api_key="k")
-    kwargs = j._request([], {}, 100)
+    kwargs = j._request([], {"type": "json_schema"}, 100)
     assert j._adapt(400, *_error_fields(err), kwargs)
     assert j.profile.reasoning_effort == "high"
 

@@ -292,6 +292,8 @@ class MLLMJudge:
         #: When an answer last ran out of time (monotonic clock), and why.
         self._gave_up_at: float | None = None
         self._gave_up: str = ""
+        #: When the server last answered anything (an answer or an HTTP error; monotonic).
+        self._heard_at: float | None = None
         self._check_priced()
 
     def __repr__(self) -> str:
@@ -392,6 +394,9 @@ class MLLMJudge:
         prof = self.profile
         said = f"HTTP {status} {code}: {message}".strip()
         sent = set(kwargs)
+        if _settings(kwargs) != _settings(self._request([], {"type": "json_schema"}, 1)):
+            # Sent before another request's rejection changed the profile: ask as it now says.
+            return True
         both = "max_tokens" in message and "max_completion_tokens" in message
         if "max_tokens" in sent and (param == "max_tokens" or both):
             prof.token_param = "max_completion_tokens"
@@ -570,6 +575,7 @@ class MLLMJudge:
                 break
             except openai.APIStatusError as exc:
                 self._unpaid(reserved, row)
+                self._heard_at = time.monotonic()  # alive, if unhappy
                 cost.seconds += time.perf_counter() - t0
                 status = exc.status_code
                 param, code, message = _error_fields(exc)
@@ -637,6 +643,7 @@ class MLLMJudge:
                 cost.usd += usd
                 self._dearest_usd = max(self._dearest_usd, usd)
                 self._gave_up_at = None
+                self._heard_at = time.monotonic()
                 return resp, cost
             attempt += 1
             if attempt > self.max_retries:
@@ -660,7 +667,12 @@ class MLLMJudge:
                 f"The model server for {self.name} at {self.base_url} gave no answer within "
                 f"{self.deadline:g} s ({tries}; last: {last})."
             )
-            self._gave_up_at, self._gave_up = time.monotonic(), message
+            now = time.monotonic()
+            if self._heard_at is None or now - self._heard_at >= self.deadline:
+                # Nothing at all from the server for a whole deadline: it is down, so the
+                # next answers fail at once. One answer unlucky with hangs while the server
+                # answers others does not stop them.
+                self._gave_up_at, self._gave_up = now, message
         else:
             message = (
                 f"The model server for {self.name} at {self.base_url} gave no answer after "
@@ -904,6 +916,17 @@ class MLLMJudge:
 
 class _OutOfTime(Exception):
     """The answer's deadline passed before another attempt could start."""
+
+
+def _settings(kwargs: dict) -> dict:
+    """A request's parameters apart from its content and size (what an adaptation changes)."""
+    out = {k: v for k, v in kwargs.items() if k not in ("messages", "timeout", "response_format")}
+    for k in ("max_tokens", "max_completion_tokens"):
+        if k in out:
+            out[k] = "set"
+    rf = kwargs.get("response_format")
+    out["response_format"] = rf.get("type") if isinstance(rf, dict) else None
+    return out
 
 
 class _Rebuild(Exception):

@@ -242,7 +242,9 @@ def request_profile(
     p = provider_profile(provider)
     fam = family_of(model)
     if reasoning_effort is None:
-        effort = fam.reasoning_effort if p.reasoning_effort else None
+        # A server given by URL may be a proxy of a cloud model: its family decides (a server
+        # that does not take the parameter says so, and the judge stops sending it).
+        effort = fam.reasoning_effort if p.reasoning_effort or p.name == "url" else None
     elif reasoning_effort == "default":
         effort = None
     else:
