@@ -143,3 +143,25 @@ def test_a_ray_head_that_never_answers_times_out(inputs):
     assert done.returncode != 0, out
     assert f"Ray at 127.0.0.1:{port} did not answer within 4 s" in out, out
     assert took < 60
+
+
+# -- accounting across passes -----------------------------------------------------------------
+def test_a_rerun_that_finds_the_budget_spent_keeps_the_figures(batch_inputs, tmp_path):
+    from intuitf.batch import BatchRequest, run_batch
+    from intuitf.imageio import load_image
+    from intuitf.testing.fake_mllm import FakeMLLMServer
+
+    vols = sorted(str(p) for p in batch_inputs["vols"].glob("phantom*.npy"))[:2]
+    settings = dict(population=6, generations=2, image_size=32, output_size=48, top_k=1,
+                    seed=1, stages=[["customize", 2]])  # fmt: skip
+    with FakeMLLMServer(target=load_image(batch_inputs["picture"]), latency=0.01) as srv:
+        req = BatchRequest(root=str(tmp_path / "b"), reference=str(batch_inputs["picture"]),
+                           volumes=vols, settings=settings, reader={"max_dim": 32}, workers=1,
+                           per_worker=2, evaluator=srv.base_url, budget_calls=12)  # fmt: skip
+        first = run_batch(req)
+        assert "budget" in {v["status"] for v in first["volumes"]}
+        again = run_batch(req)  # the same budget, already spent
+        sent = srv.stats.requests
+    assert again["totals"]["calls"] == first["totals"]["calls"] == sent > 0
+    figures = {v["key"]: (v["calls"], v["generations_done"]) for v in first["volumes"]}
+    assert {v["key"]: (v["calls"], v["generations_done"]) for v in again["volumes"]} == figures

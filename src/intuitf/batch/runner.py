@@ -259,8 +259,12 @@ class WorkerCore:
         """Run (or resume, or skip) one volume; never raises: the result says what happened."""
         t0 = time.perf_counter()
         prev = read_result(self.root, item.key) or {}
-        result = {**_base_result(item), **{k: prev[k] for k in prev if k in ("seconds",
-                  "render_s", "judge_s", "open_s", "outputs_s", "attempts", "start_similarity")}}  # fmt: skip
+        # What an earlier pass recorded stands until this one has better figures: a volume
+        # that stops at once (the budget spent before its turn) keeps its calls, generations
+        # and similarity instead of reporting zeros.
+        drop = ("status", "message", "skipped", "permanent", "lost", "retries", "worker")
+        kept = {k: v for k, v in prev.items() if k not in drop}
+        result = {**_base_result(item), **kept}
         result["attempts"] = int(result.get("attempts") or 0)
         try:
             result = await self._run(item, result)
@@ -775,7 +779,7 @@ def drive(
                     if exhausted():
                         while pending:
                             it = pending.popleft()
-                            res = _base_result(it)
+                            res = {**_base_result(it), **(read_result(config.root, it.key) or {})}
                             res.update(status="budget", message="The batch's budget was spent "
                                        "before this volume's turn.")  # fmt: skip
                             write_result(config.root, res)

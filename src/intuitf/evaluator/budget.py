@@ -116,9 +116,19 @@ def _store_of(judge: Any, path: str | os.PathLike | None):
 
 
 def run_spend(judge: Any, store_path: str | os.PathLike | None) -> Cost | None:
-    """Everything the run paid, from its verdict store; None when the judge keeps no store there."""
+    """Everything the run paid, from its verdict store; None when the judge keeps no store there.
+
+    Requests a killed process had under way count too (calls and estimated dollars; their
+    tokens are unknown): the provider may well have charged for them.
+    """
     store = _store_of(judge, store_path)
-    return store.spent() if store is not None else None
+    if store is None:
+        return None
+    spent = store.spent()
+    lost, lost_usd = store.unsettled()
+    spent.calls += lost
+    spent.usd += lost_usd
+    return spent
 
 
 def with_spend(cost: Cost, spent: Cost | None) -> Cost:

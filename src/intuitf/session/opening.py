@@ -353,6 +353,9 @@ class SessionOpening:
             sess._judged_stage = int(ckpt.get("judged_stage", sess.stage_index))
         if ckpt.get("intent"):
             sess._current_intent_record = ckpt["intent"]
+        # What was paid when this checkpoint was written (the store may hold more: a killed
+        # attempt at the next generation, which that generation's journal entry counts).
+        sess._paid_at_checkpoint = Cost(**ckpt.get("cost", {}))
         return sess
 
     @classmethod

@@ -149,6 +149,9 @@ class Session(SessionOpening, SessionInteraction):
         self.stage_index = stage_index
         self.generation = generation
         self.cost = cost or Cost()
+        #: What the run had paid when its last generation was checkpointed: a generation's
+        #: journal entry counts everything paid since, a killed attempt of it included.
+        self._paid_at_checkpoint = Cost()
         self.ratings: dict[str, float] = dict(ratings or {})
         self.last_ranking: list[str] = list(last_ranking or [])
         self.tfs: dict[str, GaussianTF] = dict(population_tfs or {})
@@ -474,12 +477,9 @@ class Session(SessionOpening, SessionInteraction):
                     "candidates": cand_records,
                     "best_id": record.best_id,
                     "rounds": result.rounds,
-                    "calls": result.cost.calls,
+                    **self._paid_this_generation(result.cost),
                     "cached_calls": result.cost.cached_calls,
                     "failed_calls": result.cost.failed_calls,
-                    "input_tokens": result.cost.input_tokens,
-                    "output_tokens": result.cost.output_tokens,
-                    "cost_usd": result.cost.usd,
                     "seconds": seconds,
                     "match_stats": stats,
                     "decided": stats["decided"],
@@ -710,6 +710,29 @@ class Session(SessionOpening, SessionInteraction):
         self.run_dir.write_checkpoint(state)
         # Kept per generation too: a branch can start from any generation and reproduce it.
         self.run_dir.write_generation_checkpoint(self.generation, state)
+        self._paid_at_checkpoint = Cost(**self.cost.to_dict())
+
+    def _paid_this_generation(self, judged: Cost) -> dict:
+        """The journal's figures of the generation just judged: everything paid since the last
+        checkpoint (what an attempt killed before its checkpoint paid, and its requests in
+        flight, included), so the journal adds up to the run's spend. Without a verdict store
+        to count from, what the tournament itself paid."""
+        if self.run_dir is None:
+            paid = judged
+        else:
+            base = self._paid_at_checkpoint
+            paid = Cost(
+                calls=max(0, self.cost.calls - base.calls),
+                input_tokens=max(0, self.cost.input_tokens - base.input_tokens),
+                output_tokens=max(0, self.cost.output_tokens - base.output_tokens),
+                usd=max(0.0, self.cost.usd - base.usd),
+            )
+        return {
+            "calls": paid.calls,
+            "input_tokens": paid.input_tokens,
+            "output_tokens": paid.output_tokens,
+            "cost_usd": paid.usd,
+        }
 
     def _write_generation_pictures(self, g: int, candidates, ranking: list[str]) -> None:
         if self.run_dir is None:
