@@ -278,20 +278,42 @@ class VolumeShelf:
 
 
 def structure_map(volume) -> dict[str, Any] | None:
-    """The volume's named structures from :mod:`intuitf.intent` when that package builds them
-    (``intent.structures.structure_map``); None until it does."""
+    """The volume's structures (:func:`intuitf.intent.hints.structure_map_of`: materials split
+    into 3-D parts with position, shape and, once a model or atlas named them, names), in a
+    form an agent reads; None when the map cannot be built."""
     try:
-        from intuitf.intent import structures  # type: ignore[attr-defined]
-    except ImportError:
-        return None
-    build = getattr(structures, "structure_map", None)
-    if build is None:
+        from intuitf.intent.hints import structure_map_of
+    except ImportError:  # an intuitf without structure maps
         return None
     try:
-        smap = build(volume)
-    except IntuitfError:
+        smap = structure_map_of(volume)
+    except (IntuitfError, ValueError, MemoryError):
         return None
-    return smap.to_dict() if hasattr(smap, "to_dict") else smap
+    out = []
+    for st in smap.structures:
+        lo, hi = st.value_range
+        out.append(
+            {
+                "id": st.id,
+                "name": st.name,
+                "summary": st.describe(),
+                "background": st.background,
+                "shape": st.shape,
+                "position": st.position,
+                "outer": st.outer,
+                "enclosed_by": st.enclosed_by,
+                "share": round(float(st.share), 4),
+                "value_range": [round(float(lo), 4), round(float(hi), 4)],
+                "values": [round(float(volume.to_original(lo)), 3),
+                           round(float(volume.to_original(hi)), 3)],  # fmt: skip
+            }
+        )
+    return {
+        "structures": out,
+        "up_axis": "xyz"[smap.up_axis],
+        "note": "value_range is normalised [0, 1] (where a Gaussian's mean goes); values are in "
+        "the data's units; names appear once a model or atlas has named the parts",
+    }
 
 
 def _first_error(exc: ValueError) -> str:
