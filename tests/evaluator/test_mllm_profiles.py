@@ -112,6 +112,33 @@ def test_an_unrelated_400_is_an_error_of_that_request_not_of_structured_output(o
         assert j.structured and not j.adaptations
 
 
+def _answering(status: int, body: object):
+    """A fake server whose chat endpoint always answers ``status`` with ``body``."""
+    from fastapi import FastAPI
+    from fastapi.responses import JSONResponse
+
+    srv = FakeMLLMServer(score=lambda im: 0.0)
+    app = FastAPI()
+
+    @app.post("/v1/chat/completions")
+    async def chat() -> JSONResponse:
+        srv.stats.requests += 1
+        return JSONResponse(body, status_code=status)
+
+    srv.app = app
+    return srv
+
+
+def test_a_400_about_something_else_leaves_structured_output_on():
+    srv = _answering(400, {"error": {"message": "Invalid image data.", "type": "invalid_request"}})
+    img = np.zeros((8, 8, 3), np.uint8)
+    with srv:
+        j = MLLMJudge("m", base_url=srv.base_url, swap="never")
+        with pytest.raises(JudgeError, match="Invalid image data"):
+            asyncio.run(j.compare(img, img + 1, Q, Intent()))
+    assert j.structured and not j.adaptations and srv.stats.requests == 1
+
+
 def test_unsupported_effort_value_is_replaced_by_a_listed_one():
     err = openai.BadRequestError(
         "bad",
@@ -253,20 +280,7 @@ def test_low_rpm_server_is_waited_out_by_its_retry_delay(oracle_images):
     ],
 )  # fmt: skip
 def test_no_credit_stops_with_a_billing_message(status, body):
-    from fastapi import FastAPI
-    from fastapi.responses import JSONResponse
-
-    from intuitf.testing.fake_mllm import FakeMLLMServer as Srv
-
-    srv = Srv(score=lambda im: 0.0)
-    app = FastAPI()
-
-    @app.post("/v1/chat/completions")
-    async def chat() -> JSONResponse:
-        srv.stats.requests += 1
-        return JSONResponse(body, status_code=status)
-
-    srv.app = app
+    srv = _answering(status, body)
     with srv:
         j = MLLMJudge("m", base_url=srv.base_url, swap="never", max_retries=4)
         img = np.zeros((8, 8, 3), np.uint8)

@@ -62,7 +62,9 @@ def _shape(body: dict) -> dict:
     return out
 
 
-def _run(personality: str, run: Path) -> tuple[subprocess.CompletedProcess, FakeMLLMServer, float]:
+def _run(
+    personality: str, run: Path, *extra: str
+) -> tuple[subprocess.CompletedProcess, FakeMLLMServer, float]:
     served = personality.removesuffix("-by-url")
     with FakeMLLMServer(target=_target(), personality=served) as srv:
         spec = [s.replace("URL", srv.base_url) for s in SPECS[personality]]
@@ -75,7 +77,7 @@ def _run(personality: str, run: Path) -> tuple[subprocess.CompletedProcess, Fake
         proc = subprocess.run(
             [sys.executable, "-m", "intuitf", "optimize", "phantom", *spec,
              "--population", "8", "--generations", "2", "--size", "64", "--output-size", "64",
-             "--top", "1", "--seed", "1", "--text", "red bone", "-o", str(run)],
+             "--top", "1", "--seed", "1", "--text", "red bone", "-o", str(run), *extra],
             capture_output=True, text=True, env=env, timeout=300,
         )  # fmt: skip
         return proc, srv, time.perf_counter() - t0
@@ -123,3 +125,13 @@ def test_short_optimize_completes_against_each_personality(personality, tmp_path
         fixture.write_text(json.dumps(first, indent=1) + "\n")
     recorded = json.loads(fixture.read_text())
     assert _shape(first[0]) == _shape(recorded[0])
+
+
+@pytest.mark.slow
+def test_max_concurrency_option_holds_the_judge_to_it(tmp_path):
+    run = tmp_path / "run"
+    proc, srv, _ = _run("vllm-one-image", run, "--max-concurrency", "1")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert srv.stats.max_in_flight == 1
+    record = json.loads((run / "run.json").read_text())
+    assert record["spec"]["judge"]["options"]["max_concurrency"] == 1
