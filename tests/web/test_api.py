@@ -366,7 +366,7 @@ def test_a_run_that_fails_says_so_in_its_events(client, monkeypatch):
     r = client.post("/api/runs", json={"volume": "phantom", "name": "broken"})
     name = r.json()["name"]
     d = wait_run(client, name)
-    assert d["info"]["status"] in ("new", "stopped")
+    assert d["info"]["status"] == "error" and "kaboom" in d["info"]["message"]
     monkeypatch.undo()
     with client.stream("GET", f"/api/runs/{name}/events") as s:
         body = ""

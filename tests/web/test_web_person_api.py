@@ -115,3 +115,193 @@ def test_run_end_shows_while_outputs_are_written(client, monkeypatch):
     finally:
         release.set()
     wait_run(client, name)
+
+
+# -- 6: every bad input is a 4xx with a message, and a refused run writes nothing ---------------
+BAD_SETTINGS = [
+    {"population": "many"},
+    {"seed": -1},
+    {"stages": [["bogus", 1]]},
+    {"stages": "initialize"},
+    {"background": [1e9, 0, 0]},
+    {"background": "black"},
+    {"camera": {"zoom": 1e308}},
+    {"camera": {"zoom": 0.0}},
+    {"camera": {"pan": [1e300, 0]}},
+    {"image_size": 10**9},
+    {"generations": 0},
+    {"no_such_setting": 1},
+]
+
+
+@pytest.mark.parametrize("settings", BAD_SETTINGS, ids=lambda s: next(iter(s)))
+def test_bad_run_settings_are_422_and_write_nothing(client, settings):
+    web = client.app.state.web
+    before = sorted(p.name for p in web.runs_dir.iterdir())
+    r = client.post("/api/runs", json={"volume": "phantom", "settings": settings})
+    assert r.status_code == 422, (settings, r.status_code, r.text)
+    body = r.json()
+    assert body["detail"] and isinstance(body["detail"], str)
+    assert sorted(p.name for p in web.runs_dir.iterdir()) == before
+    assert not [x for x in client.get("/api/runs").json() if x["name"] not in before]
+
+
+def test_bad_settings_name_their_field(client):
+    r = client.post("/api/runs", json={"volume": "phantom", "settings": {"population": "many"}})
+    assert r.status_code == 422
+    assert any("population" in ".".join(map(str, e["loc"])) for e in r.json()["errors"])
+
+
+@pytest.mark.parametrize(
+    "camera", [{"zoom": 1e308}, {"zoom": -1}, {"azimuth": float("inf")}, {"pan": [50, 0]}]
+)
+def test_views_refuse_cameras_out_of_bounds(client, camera):
+    tf = {"format": "intuitf.gaussian-tf", "version": 1,
+          "gaussians": [{"mean": 0.5, "width": 0.05, "height": 0.5, "color": [1, 1, 1]}]}  # fmt: skip
+    body = {"volume": "phantom", "tf": tf, "camera": camera, "size": 32}
+    r = client.post("/api/tf/preview", content=_json(body),
+                    headers={"Content-Type": "application/json"})  # fmt: skip
+    assert r.status_code == 422, r.text
+    assert "camera" in r.json()["detail"].lower() or "zoom" in r.json()["detail"].lower()
+
+
+def _json(obj) -> bytes:
+    import json
+
+    return json.dumps(obj, allow_nan=True).encode()
+
+
+@pytest.mark.parametrize(
+    "path", ["/static/app.js%00.png", "/static/%00", "/static/..%2f..%2fpyproject.toml"]
+)
+def test_static_paths_that_are_no_file_are_404(client, path):
+    r = client.get(path)
+    assert r.status_code == 404, (path, r.status_code)
+    assert r.json()["detail"]
+
+
+# -- 8: uploads counted as they arrive, one message; uploads can be deleted ---------------------
+def _chunked_upload(port: int, token: str, total: int, chunk: int = 64 * 1024):
+    """POST /api/volumes with a chunked multipart body of up to ``total`` bytes, sent until
+    the server answers; (bytes sent, the answer's status line and body)."""
+    import select
+    import socket
+
+    boundary = "b0undary"
+    head = (
+        f'--{boundary}\r\nContent-Disposition: form-data; name="file"; filename="v.raw"\r\n'
+        "Content-Type: application/octet-stream\r\n\r\n"
+    ).encode()
+    sock = socket.create_connection(("127.0.0.1", port), timeout=30)
+    sock.sendall(
+        (
+            "POST /api/volumes HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+            f"Authorization: token {token}\r\nTransfer-Encoding: chunked\r\n"
+            f"Content-Type: multipart/form-data; boundary={boundary}\r\n\r\n"
+        ).encode()
+    )
+    sent = 0
+    payload = head + b"\0" * (chunk - len(head))
+    answered = False
+    try:
+        while sent < total:
+            sock.sendall(f"{len(payload):x}\r\n".encode() + payload + b"\r\n")
+            sent += len(payload)
+            payload = b"\0" * chunk
+            if select.select([sock], [], [], 0)[0]:
+                answered = True
+                break
+    except OSError:  # the server closed the connection after answering
+        answered = True
+    data = b""
+    sock.settimeout(10)
+    try:
+        while b"\r\n\r\n" not in data or not data.rstrip().endswith(b"}"):
+            more = sock.recv(65536)
+            if not more:
+                break
+            data += more
+    except OSError:
+        pass
+    sock.close()
+    assert answered or data, "the server never answered"
+    return sent, data.decode("latin-1")
+
+
+def test_chunked_upload_stops_at_the_limit_with_one_message(tmp_path):
+    import json
+
+    from helpers.web_backend import TOKEN, LiveServer
+
+    app = make_app(tmp_path / "runs", max_upload_bytes=2 * 1024 * 1024)
+    with LiveServer(app) as srv:
+        sent, answer = _chunked_upload(srv.port, TOKEN, total=256 * 1024 * 1024)
+        assert answer.startswith("HTTP/1.1 413"), answer[:200]
+        detail = json.loads(answer.split("\r\n\r\n", 1)[1])["detail"]
+        assert sent < 16 * 1024 * 1024, f"{sent} bytes were taken before the refusal"
+        # A declared length over the limit gets the same words.
+        import httpx
+
+        r = httpx.post(srv.url + "/api/volumes", headers=AUTH,
+                       files={"file": ("v.raw", b"\0" * (4 * 1024 * 1024))})  # fmt: skip
+        assert r.status_code == 413 and r.json()["detail"] == detail
+        assert "2 MiB" in detail
+    assert not list((tmp_path / "runs" / ".uploads").glob("volumes/*"))
+
+
+def test_uploaded_volume_can_be_deleted_unless_a_run_uses_it(client):
+    import io
+
+    import numpy as np
+
+    def upload(name: str) -> str:
+        buf = io.BytesIO()
+        np.save(buf, np.arange(16**3, dtype=np.uint8).reshape(16, 16, 16))
+        r = client.post("/api/volumes", files={"file": (name, buf.getvalue())})
+        assert r.status_code == 201, r.text
+        return r.json()["id"]
+
+    vid = upload("gone.npy")
+    assert vid in [v["id"] for v in client.get("/api/volumes").json()]
+    r = client.delete(f"/api/volumes/{vid}")
+    assert r.status_code == 204, r.text
+    assert vid not in [v["id"] for v in client.get("/api/volumes").json()]
+    assert client.get(f"/api/volumes/{vid}/histogram").status_code == 404
+    assert client.delete(f"/api/volumes/{vid}").status_code == 404
+    # The built-in phantom and volumes that runs were made from stay.
+    r = client.delete("/api/volumes/phantom")
+    assert r.status_code == 409 and r.json()["detail"]
+    used = upload("used.npy")
+    r = client.post("/api/runs", json={"volume": used, "settings": {"generations": 1}})
+    assert r.status_code == 201
+    wait_run(client, r.json()["name"])
+    r = client.delete(f"/api/volumes/{used}")
+    assert r.status_code == 409 and r.json()["detail"]
+    assert used in [v["id"] for v in client.get("/api/volumes").json()]
+
+
+# -- 11: a run cut off by a crash says so ------------------------------------------------------
+def test_run_cut_off_by_a_crash_is_interrupted_and_resumable(client):
+    import json
+
+    name = _start(client, generations=2)
+    d = wait_run(client, name)
+    assert d["info"]["status"] == "completed"
+    registry = client.app.state.web.registry
+    _wait(lambda: registry.entry(name) is None, what="the run's folder released")
+    # What a killed server leaves: a generation done, no end in the journal, no lock held.
+    path = client.app.state.web.store.path_of(name)
+    journal = path / "journal.jsonl"
+    lines = [ln for ln in journal.read_text().splitlines()
+             if json.loads(ln).get("type") not in ("end",)]  # fmt: skip
+    gens = [ln for ln in lines if json.loads(ln).get("type") == "generation"]
+    lines.remove(gens[-1])
+    journal.write_text("\n".join(lines) + "\n")
+    events = path / "events.jsonl"
+    evs = [ln for ln in events.read_text().splitlines() if '"run_ended"' not in ln]
+    events.write_text("\n".join(evs) + "\n")
+    d = client.get(f"/api/runs/{name}").json()
+    assert d["info"]["status"] == "interrupted", d["info"]
+    assert "Resume" in d["info"]["message"]
+    listed = {r["name"]: r["status"] for r in client.get("/api/runs").json()}
+    assert listed[name] == "interrupted"

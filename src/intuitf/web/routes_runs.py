@@ -15,6 +15,7 @@ from intuitf.errors import IntuitfError
 from intuitf.session.scheduler import INTERACTIVE, render_scheduler
 from intuitf.web.common import (
     ApiError,
+    background_of,
     camera_of,
     check_candidate_id,
     check_run_name,
@@ -186,18 +187,90 @@ def _picture_path_size(web, value: str, field: str):
     return web.pictures.size(ref)
 
 
-def _build_spec(web, body: RunIn):
+class FieldsError(ApiError):
+    """A 422 that names each bad field (``errors: [{loc, msg}]``, as request validation)."""
+
+    def __init__(self, detail: str, hint: str | None, fields: dict[str, str]) -> None:
+        super().__init__(422, detail, hint)
+        self.fields = fields
+
+    def body(self) -> dict[str, Any]:
+        out = super().body()
+        out["errors"] = [{"loc": path.split("."), "msg": msg} for path, msg in self.fields.items()]
+        return out
+
+
+def spec_error(exc: IntuitfError) -> ApiError:
+    """A refused run spec as a 422 naming its fields where the spec's validation did."""
+    fields = getattr(exc, "fields", None)
+    if isinstance(fields, dict) and fields:
+        return FieldsError(exc.message, exc.hint, {str(k): str(v) for k, v in fields.items()})
+    return user_error(exc)
+
+
+#: The stages a run's plan may name.
+STAGES = ("initialize", "customize", "refine")
+
+
+def check_settings(settings: dict[str, Any]):
+    """:class:`RunSettings` from a request's settings, or a 422 naming what is wrong. Checked
+    here, before anything is written: values of the wrong type, out of range, unknown stages,
+    a background or camera no view can show."""
     from intuitf.session.settings import RunSettings
+
+    def bad(field: str, msg: str) -> FieldsError:
+        return FieldsError(
+            f"The settings are not valid: {field}: {msg}.",
+            "Fix the field named above.",
+            {f"settings.{field}": msg},
+        )
+
+    unknown = sorted(set(settings) - RunSettings.field_names())
+    if unknown:
+        raise bad(
+            unknown[0], f"unknown setting (known: {', '.join(sorted(RunSettings.field_names()))})"
+        )
+    for key in ("population", "generations", "n_gaussians", "seed", "image_size", "output_size",
+                "top_k"):  # fmt: skip
+        v = settings.get(key)
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int)):
+            raise bad(key, f"must be a whole number, got {v!r}"[:120])
+    seed = settings.get("seed")
+    if seed is not None and not 0 <= seed < 2**32:
+        raise bad("seed", f"must be within 0..{2**32 - 1}, got {seed}")
+    stages = settings.get("stages")
+    if stages is not None:
+        if not isinstance(stages, list):
+            raise bad("stages", "must be a list of [stage, generations] pairs")
+        for item in stages:
+            ok = isinstance(item, list | tuple) and len(item) == 2
+            if not ok or item[0] not in STAGES:
+                raise bad("stages", f"each is [stage, generations] with a stage of {STAGES}")
+            n = item[1]
+            if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 10_000:
+                raise bad("stages", f"{item[0]}: generations must be within 1..10000")
+    try:
+        rs = RunSettings.from_dict(settings)
+        rs.validate()
+    except IntuitfError as exc:
+        raise ApiError(422, f"The settings are not valid: {exc.message}", exc.hint) from None
+    except (TypeError, ValueError) as exc:
+        raise ApiError(422, f"The settings are not valid: {exc}.", "Check their types.") from None
+    try:
+        background_of(rs.background)
+    except ApiError as exc:
+        raise bad("background", exc.detail) from None
+    return rs
+
+
+def _build_spec(web, body: RunIn):
     from intuitf.session.spec import parse_spec
 
     entry = web.catalog.get(body.volume)
     settings = {**web.default_settings, **body.settings}
-    try:
-        rs = RunSettings.from_dict(settings)
-        camera = camera_of(rs.camera or None)
-        size, shading, bg = rs.image_size, rs.shading, tuple(rs.background)
-    except (TypeError, ValueError, IntuitfError) as exc:
-        raise ApiError(422, f"The settings are not valid: {exc}.") from None
+    rs = check_settings(settings)
+    camera = camera_of(rs.camera or None)
+    size, shading, bg = rs.image_size, rs.shading, tuple(rs.background)
     intent = resolve_intent(web, body.intent, camera, size, shading, bg)
     judge: Any = body.judge if body.judge is not None else web.evaluator
     if isinstance(judge, JudgeIn):
@@ -214,7 +287,9 @@ def _build_spec(web, body: RunIn):
     try:
         return entry, parse_spec(data)
     except IntuitfError as exc:
-        raise user_error(exc) from None
+        raise spec_error(exc) from None
+    except (TypeError, ValueError) as exc:
+        raise ApiError(422, f"The run spec is not valid: {exc}.", "Check the fields.") from None
 
 
 async def _reopen(web, name: str, *, for_verdict: bool = False, **kw) -> LiveSession:
@@ -300,23 +375,40 @@ def status_now(web, info: dict[str, Any]) -> dict[str, Any]:
     entry = web.registry.entry(info["name"])
     if status == "running" and entry is not None and not entry.live:
         outcome = entry.outcome
-        reason = getattr(outcome, "reason", None) or "stopped"
-        message = getattr(outcome, "message", None) or info.get("message", "")
-        return {**info, "status": reason, "message": message}
-    if status == "stopped" or (status == "new" and _was_started(web, info["name"])):
-        return {**info, "status": "interrupted", "message": INTERRUPTED}
+        if outcome is not None:
+            message = getattr(outcome, "message", None) or info.get("message", "")
+            return {**info, "status": outcome.reason, "message": message}
+        status = "stopped"  # it failed: its run_ended event says how
+    if status in ("stopped", "new"):
+        last = _last_run_event(web, info["name"])
+        if last is not None and last.get("type") == "run_ended":  # ended without a journal end
+            data = last.get("data") or {}
+            return {**info, "status": str(data.get("reason") or status),
+                    "message": str(data.get("message") or info.get("message", ""))}  # fmt: skip
+        if last is not None or status == "stopped":
+            return {**info, "status": "interrupted", "message": INTERRUPTED}
     return info
 
 
-def _was_started(web, name: str) -> bool:
+def _last_run_event(web, name: str) -> dict | None:
+    """The run's last run_started or run_ended event (None if it never started)."""
+    import json
+
     from intuitf.session import RunDirectory
 
     try:
         path = RunDirectory(web.store.path_of(name)).events
         with open(path, "rb") as f:
-            return b"run_started" in f.read(1 << 20)
+            lines = f.read().splitlines()
     except (OSError, IntuitfError):
-        return False
+        return None
+    for line in reversed(lines):
+        if b'"run_started"' in line or b'"run_ended"' in line:
+            try:
+                return json.loads(line)
+            except ValueError:
+                return None
+    return None
 
 
 # -- runs ----------------------------------------------------------------------------------------
@@ -339,8 +431,21 @@ async def start_run(request: Request, body: RunIn) -> dict:
         try:
             session = await asyncio.to_thread(LiveSession.open, spec, run_dir, volume=volume)
         except IntuitfError as exc:
-            raise user_error(exc) from None
+            await asyncio.to_thread(_discard, run_dir)
+            raise spec_error(exc) from None
+        except (TypeError, ValueError) as exc:
+            await asyncio.to_thread(_discard, run_dir)
+            raise ApiError(422, f"The run cannot start: {exc}.", "Check the settings.") from None
     return {"name": await _start(web, session)}
+
+
+def _discard(run_dir) -> None:
+    """Remove the folder of a run refused while it was being opened (nothing of it is kept:
+    it never ran), so that it shows nowhere."""
+    import shutil
+
+    if run_dir.is_dir():
+        shutil.rmtree(run_dir, ignore_errors=True)
 
 
 @router.get("/tree")

@@ -28,6 +28,7 @@ from intuitf.web.routes_candidates import (
     feature_tiles,
     pick_result,
 )
+from intuitf.web.security import TOO_LARGE_HINT, too_large
 
 router = APIRouter(prefix="/api", tags=["volumes"])
 
@@ -78,11 +79,7 @@ async def read_limited(upload: UploadFile, limit: int) -> bytes:
             break
         total += len(chunk)
         if total > limit:
-            raise ApiError(
-                413,
-                f"The upload is larger than the limit of {limit / (1024 * 1024):.0f} MiB.",
-                "Upload a smaller file, or start the server with a larger --max-upload-mb.",
-            )
+            raise ApiError(413, too_large(limit), TOO_LARGE_HINT)
         chunks.append(chunk)
     return b"".join(chunks)
 
@@ -98,6 +95,31 @@ async def upload_volume(request: Request, file: UploadFile = File(...)) -> dict:
     data = await read_limited(file, web.max_upload_bytes)
     entry = await asyncio.to_thread(web.catalog.save_upload, file.filename or "", data)
     return entry.to_dict()
+
+
+@router.delete("/volumes/{volume_id}", status_code=204, response_class=Response)
+async def delete_volume(request: Request, volume_id: str) -> Response:
+    """Delete an uploaded volume that no run was made from."""
+    web = state(request)
+    entry = web.catalog.get(volume_id)
+    used = await asyncio.to_thread(_runs_of_source, web, entry.source)
+    await asyncio.to_thread(web.catalog.delete_upload, volume_id, used)
+    return Response(status_code=204)
+
+
+def _runs_of_source(web, source: str) -> list[str]:
+    from intuitf.errors import IntuitfError
+    from intuitf.session import RunDirectory
+
+    out = []
+    for name in web.store.names():
+        try:
+            record = RunDirectory(web.store.path_of(name)).read_run()
+        except IntuitfError:
+            continue
+        if ((record.get("spec") or {}).get("volume") or {}).get("source") == source:
+            out.append(name)
+    return out
 
 
 @router.get("/volumes/{volume_id}/histogram", response_model=Histogram)

@@ -47,6 +47,17 @@ _MIN_SECRET = 8
 
 DEFAULT_HOSTS = ("127.0.0.1", "localhost", "[::1]")
 
+TOO_LARGE_HINT = "Upload a smaller file, or start the server with a larger --max-upload-mb."
+
+
+def too_large(limit: int) -> str:
+    """The one message of a refused upload, for a limit of ``limit`` bytes."""
+    return f"The upload is larger than the limit of {limit / (1024 * 1024):g} MiB."
+
+
+class BodyTooLarge(Exception):
+    """A request body (chunked, or longer than it said) passed the server's limit."""
+
 
 def find_secrets(extra: Iterable[str] = ()) -> list[bytes]:
     """Values that must never reach the page: API keys in the environment and the config file."""
@@ -121,9 +132,13 @@ class SecurityMiddleware:
         token: str,
         allowed_hosts: Iterable[str] = DEFAULT_HOSTS,
         max_body_bytes: int | None = None,
+        upload_limit: int | None = None,
         secrets_: list[bytes] | None = None,
     ) -> None:
         self.app = app
+        #: The upload limit a person set (--max-upload-mb): what a refusal names. The body may
+        #: be a little larger (a form's boundaries and headers around the file).
+        self.upload_limit = upload_limit if upload_limit is not None else max_body_bytes
         self.token = token
         self.hosts = HostPolicy(allowed_hosts)
         self.max_body = max_body_bytes
@@ -175,14 +190,50 @@ class SecurityMiddleware:
         if kind == "http" and self.max_body is not None:
             length = headers.get("content-length")
             if length is not None and length.isdigit() and int(length) > self.max_body:
-                await self._deny(
-                    scope, receive, send, 413,
-                    f"The upload is larger than the limit of {self.max_body // (1024 * 1024)} MiB.",
-                    "Upload a smaller file, or start the server with a larger --max-upload-mb.",
-                )  # fmt: skip
+                await self._deny(scope, receive, send, 413, too_large(self.upload_limit or 0),
+                                 TOO_LARGE_HINT)  # fmt: skip
                 return
         set_cookie = query_ok and cookie_token != self.token and kind == "http"
-        await self.app(scope, receive, self._wrap_send(send, set_cookie))
+        if kind != "http" or self.max_body is None:
+            await self.app(scope, receive, self._wrap_send(send, set_cookie))
+            return
+        # A chunked body (or one longer than its Content-Length said) is counted as it
+        # arrives, and refused at the limit: nothing past it is read or spooled.
+        limit = self.max_body
+        seen = {"bytes": 0, "over": False, "answered": False}
+
+        async def refuse() -> None:
+            if not seen["answered"]:
+                seen["answered"] = True
+                await self._deny(scope, receive, send, 413, too_large(self.upload_limit or 0),
+                                 TOO_LARGE_HINT)  # fmt: skip
+
+        async def counted_receive():
+            message = await receive()
+            if message["type"] == "http.request":
+                seen["bytes"] += len(message.get("body", b""))
+                if seen["bytes"] > limit:
+                    seen["over"] = True
+                    raise BodyTooLarge()
+            return message
+
+        wrapped = self._wrap_send(send, set_cookie)
+
+        async def tracked_send(message) -> None:
+            # Whatever the app makes of a body cut short (a parse error), the answer is 413.
+            if seen["over"]:
+                await refuse()
+                return
+            if message["type"] == "http.response.start":
+                seen["answered"] = True
+            await wrapped(message)
+
+        try:
+            await self.app(scope, counted_receive, tracked_send)
+        except BodyTooLarge:
+            await refuse()
+        if seen["over"]:
+            await refuse()
 
     # -- helpers --------------------------------------------------------------------------
     def _valid(self, candidate: str | None) -> bool:

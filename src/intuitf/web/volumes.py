@@ -237,6 +237,29 @@ class VolumeCatalog:
         return out
 
     # -- uploads --------------------------------------------------------------------------
+    def delete_upload(self, volume_id: str, used_by: list[str]) -> None:
+        """Remove an uploaded volume (blocking). Only uploads can go, and only while no run
+        was made from them (``used_by``: the runs that were), so no run loses its volume."""
+        entry = self.get(volume_id)
+        if entry.kind != "upload":
+            raise ApiError(
+                409,
+                f"{entry.id!r} is not an upload; only uploaded volumes can be deleted here.",
+                "Remove the file from the --data folder or the command line instead.",
+            )
+        if used_by:
+            shown = ", ".join(used_by[:5]) + (" …" if len(used_by) > 5 else "")
+            raise ApiError(
+                409,
+                f"Runs were made from {entry.id!r} ({shown}); deleting it would lose their volume.",
+                "Delete those runs first.",
+            )
+        with self._lock:
+            Path(entry.source).unlink(missing_ok=True)
+            self._entries.pop(entry.id, None)
+            self._loaded.pop(entry.id, None)
+            self._histograms.pop(entry.id, None)
+
     def save_upload(self, filename: str, data: bytes) -> VolumeEntry:
         """Keep an uploaded volume file and check that it loads (blocking).
 
