@@ -62,7 +62,8 @@ def run_stdio(config: McpConfig) -> None:
     import anyio
 
     _quiet_logs()
-    server, _ = build_server(config)
+    server, service = build_server(config)
+    service.warm_up()
     anyio.run(server.run_stdio_async)
 
 
@@ -72,7 +73,8 @@ def http_app(config: McpConfig, token: str, allowed_hosts: list[str]):
 
     from intuitf.web.security import SecurityMiddleware
 
-    server, _ = build_server(config)
+    server, service = build_server(config)
+    service.warm_up()
     # The middleware checks Host, Origin and the token; the SDK's own check would refuse the
     # same things again with other messages.
     inner = server.streamable_http_app(

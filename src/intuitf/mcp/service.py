@@ -88,6 +88,24 @@ class McpService:
         self.runs = RunDesk(self)
         self._picture_counter = 0
 
+    def warm_up(self) -> None:
+        """Import what a first run and a first picture need, on a background thread, so the
+        agent's first start_run and render do not wait for it (seconds on a loaded machine)."""
+        import threading
+
+        def work() -> None:
+            import importlib
+
+            for name in ("intuitf.explorer.factory", "intuitf.evaluator.metric",
+                         "intuitf.evaluator.tournament", "intuitf.render", "intuitf.plots",
+                         "intuitf.intent.hints", "intuitf.session.outputs"):  # fmt: skip
+                try:
+                    importlib.import_module(name)
+                except Exception:  # a missing optional part shows when it is used
+                    pass
+
+        threading.Thread(target=work, name="intuitf-mcp-warm-up", daemon=True).start()
+
     async def close(self) -> None:
         """Stop every live run between matches and wait for each to release its folder."""
         await self.registry.close_all()

@@ -304,8 +304,10 @@ def structure_map(volume) -> dict[str, Any] | None:
                 "enclosed_by": st.enclosed_by,
                 "share": round(float(st.share), 4),
                 "value_range": [round(float(lo), 4), round(float(hi), 4)],
-                "values": [round(float(volume.to_original(lo)), 3),
-                           round(float(volume.to_original(hi)), 3)],  # fmt: skip
+                "values": [
+                    round(float(volume.to_original(lo)), 3),
+                    round(float(volume.to_original(hi)), 3),
+                ],  # fmt: skip
             }
         )
     return {
