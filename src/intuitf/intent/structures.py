@@ -94,6 +94,10 @@ class StructureMap:
     up_axis: int = 2  # 0 x, 1 y, 2 z
     up_sign: int = 1
     shape: tuple[int, int, int] = (0, 0, 0)  # of the reduced grid (z, y, x)
+    #: Structure id + 1 per voxel of the reduced grid (0: none), with the reduced grid's voxel
+    #: size (z, y, x); kept in memory only (not in :meth:`to_dict`).
+    labels: np.ndarray | None = field(default=None, repr=False, compare=False)
+    voxel_size: tuple[float, float, float] = (1.0, 1.0, 1.0)
 
     def foreground(self) -> list[Structure]:
         return [s for s in self.structures if not s.background]
@@ -112,7 +116,8 @@ class StructureMap:
         from dataclasses import replace
 
         out = [replace(s, name=names.get(s.id, s.name)) for s in self.structures]
-        return StructureMap(list(self.materials), out, self.up_axis, self.up_sign, self.shape)
+        return StructureMap(list(self.materials), out, self.up_axis, self.up_sign, self.shape,
+                            self.labels, self.voxel_size)  # fmt: skip
 
     def to_dict(self) -> dict:
         return {
@@ -282,7 +287,13 @@ def build_structure_map(
             masks.append(part)
         del rest
     structures = _enclosure(structures, masks)
-    return StructureMap(mats, structures, up_ax, up_sign, tuple(int(s) for s in shape))  # type: ignore[arg-type]
+    labels = np.zeros(shape, np.int16)
+    for st, m in zip(structures, masks, strict=True):
+        labels[m & (labels == 0)] = st.id + 1
+    return StructureMap(
+        mats, structures, up_ax, up_sign, tuple(int(s) for s in shape),  # type: ignore[arg-type]
+        labels, tuple(float(v) for v in sp),  # type: ignore[arg-type]
+    )  # fmt: skip
 
 
 def shape_of(a: np.ndarray, axis: int) -> int:

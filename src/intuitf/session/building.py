@@ -29,11 +29,19 @@ INTENT_PICTURES = ("reference", "sketch", "base")
 def default_camera(volume: Any = None, spec: RunSpec | None = None) -> dict:
     """The camera (``Camera.to_dict()``) a new run judges from when nothing chooses one.
 
-    The one place that decides it for every front end; ``volume`` and ``spec`` are there for a
-    choice per volume or per intent (today the same view for all).
+    The one place that decides it for every front end. With a ``volume``, the view is chosen
+    for it (:func:`intuitf.intent.viewpoint.choose_view`: upright, the classic three-quarter
+    view unless another shows its structures clearly better); without one, the classic view.
     """
     from intuitf.render import Camera
 
+    if volume is not None and getattr(volume, "data", None) is not None:
+        # A view that shows the object: upright along the axis it stands on, chosen by
+        # viewpoint entropy of its structures (intuitf.intent.viewpoint).
+        from intuitf.intent.hints import structure_map_of
+        from intuitf.intent.viewpoint import choose_view
+
+        return choose_view(structure_map_of(volume)).camera.to_dict()
     return Camera(azimuth=DEFAULT_AZIMUTH, elevation=DEFAULT_ELEVATION).to_dict()
 
 
