@@ -485,6 +485,7 @@ class Session(SessionOpening, SessionInteraction):
                     "decided": stats["decided"],
                     "undecided": stats["undecided"],
                     "retried": stats["retried"],
+                    "indistinct": bool(stats["indistinct"]),
                     "matches": [_match_dict(m) for m in result.matches],
                 }
             )
@@ -771,8 +772,13 @@ def _match_stats(matches) -> dict[str, int]:
     from intuitf.evaluator.tournament import MatchStats
 
     st = MatchStats.of(matches)
+    # A decided match that came out a tie tells the candidates apart no more than none; when
+    # every decided match is one, the judge could not tell this generation's candidates apart
+    # ("indistinct": the run's summary, report and web app say so).
+    ties = sum(1 for m in matches if m.verdict.decided and m.verdict.overall == "tie")
     return {"matches": st.matches, "decided": st.decided, "undecided": st.undecided,
-            "retried": st.retried}  # fmt: skip
+            "retried": st.retried, "ties": ties,
+            "indistinct": int(st.decided > 0 and ties == st.decided)}  # fmt: skip
 
 
 def _safe_dict(result) -> dict:
