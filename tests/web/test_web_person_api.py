@@ -305,3 +305,97 @@ def test_run_cut_off_by_a_crash_is_interrupted_and_resumable(client):
     assert "Resume" in d["info"]["message"]
     listed = {r["name"]: r["status"] for r in client.get("/api/runs").json()}
     assert listed[name] == "interrupted"
+
+
+# -- 7 and 17: the view socket answers every bad message and stays up; refusals log nothing ------
+TF3 = {"format": "intuitf.gaussian-tf", "version": 1, "gaussians": [
+    {"mean": 0.3, "width": 0.05, "height": 0.3, "color": [1, 0, 0]},
+    {"mean": 0.6, "width": 0.05, "height": 0.5, "color": [0, 1, 0]},
+    {"mean": 0.9, "width": 0.05, "height": 0.7, "color": [0, 0, 1]}]}  # fmt: skip
+
+
+def _bad_messages(qid: str) -> list[str]:
+    import json
+
+    good = {"target": {"candidate": qid}, "size": 64}
+    return [
+        json.dumps({**good, "highlight": [True]}),
+        json.dumps({**good, "highlight": [1.5]}),
+        json.dumps({**good, "size": "big"}),
+        json.dumps({**good, "size": 10**9}),
+        json.dumps({**good, "camera": {"zoom": 1e308}}),
+        json.dumps({**good, "camera": {"pan": "left"}}),
+        json.dumps({**good, "background": [1, 2]}),
+        json.dumps({**good, "quality": "ultra"}),
+        json.dumps({"target": {"candidate": "nope/g000-000"}, "size": 64}),
+        json.dumps({"target": {"volume": "phantom", "tf": {"gaussians": "x"}}, "size": 64}),
+        json.dumps({"target": [1, 2]}),
+        json.dumps([1, 2, 3]),
+        "[" * 100_000,
+        "{" * 50_000,
+        "not json",
+        "x" * 300_000,
+    ]
+
+
+class _Records(__import__("logging").Handler):
+    def __init__(self) -> None:
+        super().__init__()
+        self.messages: list[str] = []
+
+    def emit(self, record) -> None:
+        self.messages.append(record.getMessage())
+
+
+def test_view_socket_answers_every_bad_message_and_stays_up(tmp_path):
+    import asyncio
+    import json
+    import logging
+
+    import websockets
+
+    from helpers.web_backend import TOKEN, LiveServer
+
+    app = make_app(tmp_path / "runs")
+    records = _Records()
+    for name in ("uvicorn.error", "intuitf.web.app"):
+        logging.getLogger(name).addHandler(records)
+    try:
+        with LiveServer(app) as srv:
+            from fastapi.testclient import TestClient
+
+            with TestClient(app, headers=AUTH) as c:
+                r = c.post("/api/runs", json={"volume": "phantom", "settings": {"generations": 1}})
+                qid = wait_run(c, r.json()["name"])["gallery"][0]["qid"]
+
+            async def talk() -> None:
+                url = f"{srv.ws_url}/api/view?token={TOKEN}"
+                async with websockets.connect(url, max_size=None) as ws:
+                    for text in _bad_messages(qid):
+                        await ws.send(text)
+                        reply = json.loads(await asyncio.wait_for(ws.recv(), 60))
+                        assert reply.get("error"), (text[:80], reply)
+                    # Still up: a good request gets its frame.
+                    await ws.send(json.dumps({"req": 7, "target": {"candidate": qid}, "size": 64,
+                                              "highlight": [0]}))  # fmt: skip
+                    header = json.loads(await asyncio.wait_for(ws.recv(), 60))
+                    assert header["req"] == 7 and header["format"] == "png", header
+                    assert isinstance(await asyncio.wait_for(ws.recv(), 60), bytes)
+                # Refused handshakes (no token, another site) are answered, and log nothing.
+                for url, headers in [
+                    (f"{srv.ws_url}/api/view", {}),
+                    (f"{srv.ws_url}/api/view?token={TOKEN}", {"Origin": "http://evil.example"}),
+                    (f"{srv.ws_url}/api/view?token=wrong", {}),
+                ]:
+                    try:
+                        async with websockets.connect(url, additional_headers=headers):
+                            raise AssertionError("a refused handshake was accepted")
+                    except websockets.InvalidStatus as exc:
+                        assert exc.response.status_code in (401, 403)
+
+            asyncio.run(talk())
+    finally:
+        for name in ("uvicorn.error", "intuitf.web.app"):
+            logging.getLogger(name).removeHandler(records)
+    noise = [m for m in records.messages if "handshake" in m or "Exception in ASGI" in m]
+    assert not noise, noise

@@ -15,6 +15,7 @@ A pure ASGI middleware, so that it covers WebSockets as well as HTTP.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import re
 import secrets
@@ -53,6 +54,34 @@ TOO_LARGE_HINT = "Upload a smaller file, or start the server with a larger --max
 def too_large(limit: int) -> str:
     """The one message of a refused upload, for a limit of ``limit`` bytes."""
     return f"The upload is larger than the limit of {limit / (1024 * 1024):g} MiB."
+
+
+class _RefusedHandshakes(logging.Filter):
+    """Drops uvicorn's "returned without completing handshake" error for a WebSocket
+    handshake this middleware refused on purpose (answered 401/403/400 over HTTP): uvicorn's
+    sans-io protocol logs it after any such answer. Only as many records are dropped as
+    handshakes were refused, so a real failure to complete one is still logged."""
+
+    MESSAGE = "ASGI callable returned without completing handshake"
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.pending = 0
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if self.pending and self.MESSAGE in record.getMessage():
+            self.pending -= 1
+            return False
+        return True
+
+
+_REFUSED = _RefusedHandshakes()
+
+
+def _watch_refusals() -> None:
+    logger = logging.getLogger("uvicorn.error")
+    if _REFUSED not in logger.filters:
+        logger.addFilter(_REFUSED)
 
 
 class BodyTooLarge(Exception):
@@ -136,6 +165,7 @@ class SecurityMiddleware:
         secrets_: list[bytes] | None = None,
     ) -> None:
         self.app = app
+        _watch_refusals()
         #: The upload limit a person set (--max-upload-mb): what a refusal names. The body may
         #: be a little larger (a form's boundaries and headers around the file).
         self.upload_limit = upload_limit if upload_limit is not None else max_body_bytes
@@ -306,11 +336,12 @@ class SecurityMiddleware:
         message = await receive()
         if message.get("type") != "websocket.connect":
             return
-        if "websocket.http.response" in scope.get("extensions", {}) or {}:
+        if "websocket.http.response" in (scope.get("extensions") or {}):
             await send(
                 {"type": "websocket.http.response.start", "status": status, "headers": headers}
             )
             await send({"type": "websocket.http.response.body", "body": body})
+            _REFUSED.pending += 1
         else:
             await send({"type": "websocket.close", "code": 1008, "reason": detail[:120]})
 

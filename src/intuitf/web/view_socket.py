@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import logging
 import time
 from typing import Any
 
@@ -39,6 +40,10 @@ from intuitf.web.common import (
 )
 
 router = APIRouter()
+log = logging.getLogger(__name__)
+
+#: The longest request text read (a request is a few hundred characters; a TF a few KB).
+MAX_MESSAGE = 256 * 1024
 
 #: Largest side of a frame while dragging.
 DRAG_MAX = 128
@@ -73,11 +78,14 @@ class ViewSocket:
                 if text is None:
                     await self._error(None, "Send requests as JSON text.", None)
                     continue
+                if len(text) > MAX_MESSAGE:
+                    await self._error(None, f"A request is at most {MAX_MESSAGE} characters.", None)
+                    continue
                 try:
                     req = json.loads(text)
                     if not isinstance(req, dict):
                         raise ValueError("not an object")
-                except ValueError:
+                except (ValueError, RecursionError):  # RecursionError: nesting too deep
                     await self._error(None, "A request must be a JSON object.", None)
                     continue
                 if self.busy:
@@ -103,6 +111,15 @@ class ViewSocket:
                     await self._error(req.get("req"), exc.detail, exc.hint)
                 except IntuitfError as exc:
                     await self._error(req.get("req"), exc.message, exc.hint)
+                except (WebSocketDisconnect, asyncio.CancelledError):
+                    raise
+                except Exception as exc:  # a request no check foresaw: say so, keep the socket
+                    log.warning("view request failed: %r", exc, exc_info=True)
+                    await self._error(
+                        req.get("req"),
+                        f"The view could not be rendered ({type(exc).__name__}).",
+                        "Check the request's fields; see the server's log.",
+                    )
                 req, self.pending = self.pending, None
         except (WebSocketDisconnect, RuntimeError, asyncio.CancelledError):
             pass
@@ -159,8 +176,10 @@ class ViewSocket:
         shaded = bool(req.get("shaded", True))
         bg = background_of(req.get("background"))
         highlight = req.get("highlight") or []
-        if not isinstance(highlight, list) or not all(isinstance(i, int) for i in highlight):
-            raise ApiError(422, "highlight is a list of Gaussian indices.")
+        if not isinstance(highlight, list) or not all(
+            isinstance(i, int) and not isinstance(i, bool) for i in highlight
+        ):
+            raise ApiError(422, "highlight is a list of Gaussian indices (whole numbers).")
         tf, volume = await self._target(req.get("target"))
         vr = self.web.view_renderer(volume, bg)
         if quality == "drag":
