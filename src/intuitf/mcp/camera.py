@@ -56,7 +56,13 @@ def parse_camera(value: Any, extent: tuple[float, float, float]) -> Camera:
             f"Unknown camera field(s): {sorted(unknown)}.",
             f"Use {sorted(ORBIT_FIELDS)} or {sorted(VTK_FIELDS)}.",
         )
-    return Camera.from_dict(value)
+    cam = Camera.from_dict(value)
+    if not 0.01 <= cam.zoom <= 100.0 or max(abs(cam.pan[0]), abs(cam.pan[1])) > 10.0:
+        raise RenderError(
+            f"Camera zoom {cam.zoom:g} or pan {list(cam.pan)} would leave the volume out of view.",
+            "Use zoom 0.01 to 100 (1 fits the volume) and pan within ±10.",
+        )
+    return cam
 
 
 def _vector(value: Any, name: str) -> np.ndarray:
@@ -136,7 +142,7 @@ def from_vtk(d: dict, extent: tuple[float, float, float]) -> Camera:
         half_seen = _number(d.get("parallel_scale"), "parallel_scale", 0.0, math.inf)
         zoom = radius / half_seen
         kw = {"projection": "orthographic"}
-    if not 1e-3 <= zoom <= 1e3:
+    if not 0.01 <= zoom <= 100.0:
         raise RenderError(
             f"This camera frames the volume {zoom:.3g} times as large as a fitted view.",
             "Stand nearer or farther: the volume should be at least partly in the picture.",
@@ -147,6 +153,11 @@ def from_vtk(d: dict, extent: tuple[float, float, float]) -> Camera:
         -float(offset @ right) / (2.0 * half_seen),
         -float(offset @ up) / (2.0 * half_seen),
     )
+    if max(abs(pan[0]), abs(pan[1])) > 10.0:
+        raise RenderError(
+            "The focal point is so far from the volume that it would be out of the picture.",
+            f"Look at a point near the volume's centre {[round(float(c), 3) for c in center]}.",
+        )
     return Camera(azimuth=azimuth % 360.0, elevation=elevation, roll=roll, zoom=zoom,
                   pan=pan, **kw)  # fmt: skip
 

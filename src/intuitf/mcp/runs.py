@@ -388,12 +388,11 @@ class RunDesk:
     async def _sheet(self, name: str, items: list[dict], size: int):
         from intuitf.mcp.service import Picture, check_background, check_size
         from intuitf.plots import contact_sheet
-        from intuitf.render import Camera
 
         size = check_size(size)
         ov, settings = await asyncio.to_thread(self.volume_of, name)
         vol = await asyncio.to_thread(self.svc.shelf.volume, ov)
-        cam = Camera.from_dict(settings["camera"]) if settings.get("camera") else Camera()
+        cam = self.svc._camera(None, settings, vol)
         shaded = bool(settings.get("shading", True))
         bg = check_background(None, settings)
         vr = await asyncio.to_thread(self.svc.shelf.view_renderer, ov, bg)

@@ -263,10 +263,16 @@ class McpService:
         return Reply(data, [Picture(image, path)])
 
     def _camera(self, camera: Any, settings: dict, vol):
-        if camera is None and settings.get("camera"):
-            from intuitf.render import Camera
+        """The camera an agent gave, else the run's judging camera, else the view a new run
+        of this volume would judge from (the same default as every other front end)."""
+        from intuitf.render import Camera
 
+        if camera is None and settings.get("camera"):
             return Camera.from_dict(settings["camera"])
+        if camera is None:
+            from intuitf.session.building import default_camera
+
+            return Camera.from_dict(default_camera(vol))
         return parse_camera(camera, vol.extent)
 
     def save_picture(self, image: np.ndarray, stem: str, camera, vol, shaded: bool, bg) -> Path:

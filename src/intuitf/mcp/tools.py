@@ -32,8 +32,8 @@ Camera = Annotated[
         description="Camera, either form. Orbit: {azimuth, elevation, roll, zoom, pan: [x, y], "
         "fov, projection} (degrees; zoom 1 fits the volume). VTK/ParaView: {position: [x,y,z], "
         "focal_point: [x,y,z], view_up: [x,y,z], view_angle} or with parallel_scale; world "
-        "units are voxel index x spacing. Default: the run's judging camera, else azimuth 0 "
-        "elevation 0 (front, +z up)."
+        "units are voxel index x spacing. Default: the run's judging camera, else the view "
+        "intuitf chooses for the volume (the one a new run would judge from)."
     ),
 ]
 Size = Annotated[int, Field(description="Picture size in pixels per side (16-1024).")]
