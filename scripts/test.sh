@@ -22,4 +22,7 @@ if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = "0" ]; then
 fi
 
 python -m pip install -q --disable-pip-version-check -e ".[test]"
+# The type checker first ([tool.mypy] in pyproject.toml: strict for session/, render/, tf/ and
+# explorer/); a type error fails the run as a failing test does.
+python -m mypy
 python -m pytest "$@"

@@ -117,7 +117,9 @@ class CMAExplorer(BaseExplorer):
         self._X = self._es.ask()
         return [self._new(decode(x, self._template, self.bounds), "cma") for x in self._X]
 
-    def _fresh_population(self, initial, size=None, keep=()):
+    def _fresh_population(
+        self, initial: Sequence[GaussianTF], size: int | None = None, keep: Sequence[Candidate] = ()
+    ) -> list[Candidate]:
         # The first population: CMA-ES samples around the start point.
         if initial:
             template = initial[0]
@@ -202,7 +204,7 @@ class CMAExplorer(BaseExplorer):
         if state.get("format") != STATE_FORMAT or state.get("method") != cls.method:
             raise ValueError("This is not an intuitf CMA-ES explorer state.")
 
-        def stage_of(v):
+        def stage_of(v: Any) -> Any:
             return StagePreset.from_dict(v) if isinstance(v, dict) else v
 
         a = state["args"]

@@ -8,7 +8,7 @@ from typing import Any
 from intuitf.explorer.base import BaseExplorer
 from intuitf.explorer.cmaes import CMAExplorer
 from intuitf.explorer.ga import GeneticExplorer
-from intuitf.explorer.methods import METHODS  # re-exported
+from intuitf.explorer.methods import METHODS as METHODS  # re-exported
 from intuitf.explorer.random_search import RandomSearchExplorer
 from intuitf.explorer.stages import paper_settings
 

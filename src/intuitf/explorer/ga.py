@@ -54,7 +54,7 @@ class GeneticExplorer(BaseExplorer):
             tf = _canonical(mutate(parent.tf, self._rng, params, self.bounds))
             tf = _canonical(self.dedup(tf, nxt, params))
             nxt.append(self._new(tf, "local", (parent.id,)))
-        picks = roulette(fitness, n - len(nxt), self._rng)
+        picks = roulette(list(fitness), n - len(nxt), self._rng)
         for k in range(0, len(picks), 2):
             pa = ranked[int(picks[k])]
             pb = ranked[int(picks[k + 1])] if k + 1 < len(picks) else None
@@ -68,7 +68,10 @@ class GeneticExplorer(BaseExplorer):
                     fallback_prob=preset.fallback_prob,
                     by_mean=preset.pair_by_mean,
                 )
-                children = [(ca, "crossover", (pa.id, pb.id)), (cb, "crossover", (pb.id, pa.id))]
+                children: list[tuple[GaussianTF, str, tuple[str, ...]]] = [
+                    (ca, "crossover", (pa.id, pb.id)),
+                    (cb, "crossover", (pb.id, pa.id)),
+                ]
             else:
                 children = [(pa.tf, "mutation", (pa.id,))]
                 if pb is not None:

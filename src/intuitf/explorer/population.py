@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -94,7 +95,7 @@ def seeded_tf(
         width = _clip(max(m.spread, bounds.width[0]) * math.exp(rng.normal(0.0, 0.4)), bounds.width)
         gs.append(Gaussian(mean, width, bounds.sample_height(rng), color(rng)))
     gaps = [(a.center + b.center) / 2.0 for a, b in zip(mats[:-1], mats[1:], strict=False)]
-    order = rng.permutation(len(gaps)) if gaps else []
+    order: Any = rng.permutation(len(gaps)) if gaps else []
     for k in order:
         if len(gs) >= n_gaussians:
             break

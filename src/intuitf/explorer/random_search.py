@@ -8,6 +8,7 @@ import numpy as np
 
 from intuitf.explorer.base import BaseExplorer
 from intuitf.explorer.candidate import Candidate
+from intuitf.tf.gaussian import GaussianTF
 
 
 class RandomSearchExplorer(BaseExplorer):
@@ -33,7 +34,7 @@ class RandomSearchExplorer(BaseExplorer):
             return [best, *made]
         return [best, *self._fresh_population((), size=n_new, keep=[best])]
 
-    def _redraw_free(self, tf):
+    def _redraw_free(self, tf: GaussianTF) -> GaussianTF:
         b, rng = self.bounds, self._rng
         gs = [
             g

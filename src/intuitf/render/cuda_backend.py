@@ -47,6 +47,7 @@ machine without a GPU; ``benchmarks/render.py --device cuda`` is the measurement
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numba import cuda
@@ -72,7 +73,7 @@ class DeviceVolume:
         self.data = cuda.to_device(context.data)
         self.grad = None
 
-    def gradient(self):
+    def gradient(self) -> Any:
         if self.grad is None:
             ctx = self.context
             if ctx.has_gradient:
@@ -112,10 +113,10 @@ class CudaBackend:
         self._no_rgb = cuda.device_array((1, 1, 3), dtype=np.uint8)
 
     # -- pieces ---------------------------------------------------------------------------
-    def grad(self):
+    def grad(self) -> Any:
         return self.volume.gradient() if self.renderer.shading else self._no_grad
 
-    def cam(self, frame: ViewFrame):
+    def cam(self, frame: ViewFrame) -> Any:
         return cuda.to_device(frame.packed().astype(np.float32))
 
     def luts(self, tfs: Sequence[GaussianTF]) -> np.ndarray:
@@ -127,13 +128,13 @@ class CudaBackend:
         step = max(1, min(k, MAX_LAUNCH_OUTPUT // per))
         return [slice(a, min(a + step, k)) for a in range(0, k, step)]
 
-    def _outputs(self, k: int, to8: bool):
+    def _outputs(self, k: int, to8: bool) -> tuple[Any, Any]:
         p = self.renderer.width * self.renderer.height
         if to8:
             return self._no_rgba, cuda.device_array((k, p, 3), dtype=np.uint8)
         return cuda.device_array((k, p, 4), dtype=np.float32), self._no_rgb
 
-    def _pictures(self, out_rgba, out_rgb, to8: bool) -> np.ndarray:
+    def _pictures(self, out_rgba: Any, out_rgb: Any, to8: bool) -> np.ndarray:
         h, w = self.renderer.height, self.renderer.width
         if to8:
             return out_rgb.copy_to_host().reshape(-1, h, w, 3)
@@ -174,7 +175,8 @@ class CudaSampleCache(CacheViews):
 
     def __init__(
         self, renderer: VolumeRenderer, camera: Camera, frame: ViewFrame, backend: CudaBackend,
-        counts, tile_base, samples, diffuse, specular, segmin, segmax, n_samples: int,
+        counts: Any, tile_base: Any, samples: Any, diffuse: Any, specular: Any, segmin: Any,
+        segmax: Any, n_samples: int,
     ) -> None:  # fmt: skip
         self.renderer = renderer
         self.camera = camera
@@ -256,7 +258,7 @@ class CudaSampleCache(CacheViews):
             parts.append((lut.shape[0], cuda.to_device(lut), cuda.to_device(occ)))
         return parts
 
-    def launch(self, k: int, luts, occ, to8: bool = True) -> tuple:
+    def launch(self, k: int, luts: Any, occ: Any, to8: bool = True) -> tuple[Any, Any]:
         """Composite K uploaded LUTs in one launch; returns the (RGBA, RGB) device outputs.
 
         Asynchronous: the benchmark times it with CUDA events; :meth:`render_many` uses it.

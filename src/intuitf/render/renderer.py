@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -14,6 +15,10 @@ from intuitf.render.context import BLOCK_SIZE, RenderContext, render_context
 from intuitf.render.device import select_device
 from intuitf.tf.gaussian import GaussianTF
 from intuitf.volume.volume import Volume
+
+if TYPE_CHECKING:
+    from intuitf.render.cache import CacheViews
+    from intuitf.render.cuda_backend import CudaBackend
 
 #: LUT alphas below this are treated as empty, so Gaussian tails (1e-30 ...) do not defeat
 #: empty-space skipping. 300 such samples would block under 0.3 % of the light (< 1/255).
@@ -122,7 +127,7 @@ class VolumeRenderer:
         self.context: RenderContext = render_context(volume)
         #: ``"cpu"`` or ``"cuda"``: where this renderer's kernels run.
         self.device = select_device(device) if device is not None else self.context.device
-        self._cuda = None
+        self._cuda: CudaBackend | None = None
 
     # -- shared pieces --------------------------------------------------------------------
     @property
@@ -157,7 +162,7 @@ class VolumeRenderer:
         """LUT index range (lo, hi) each empty-space block's samples can take."""
         return self.context.block_ranges(self.lut_size)
 
-    def _cuda_backend(self):
+    def _cuda_backend(self) -> CudaBackend:
         """The GPU state (device arrays, launch geometry), made on first use."""
         if self._cuda is None:
             from intuitf.render.cuda_backend import CudaBackend
@@ -218,7 +223,7 @@ class VolumeRenderer:
             return self._cuda_backend().march(self.lut(tf)[None], self.frame(camera))[0]
         return self.to_rgb8(self.render_rgba(tf, camera))
 
-    def sample_cache(self, camera: Camera | None = None):
+    def sample_cache(self, camera: Camera | None = None) -> CacheViews:
         """Sample the volume once along every ray of ``camera``: a :class:`SampleCache`
         (a ``CudaSampleCache`` in GPU memory when :attr:`device` is ``"cuda"``)."""
         if self.device == "cuda":

@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 from intuitf.evaluator.types import Cost, Intent
 from intuitf.session.rundir import RunDirectory
 from intuitf.session.settings import RunSettings
+from intuitf.tf import GaussianTF
+from intuitf.volume import Volume
 
 
 def _palette_hint(intent: Intent, settings: RunSettings) -> list[tuple[float, float, float]]:
@@ -13,19 +18,22 @@ def _palette_hint(intent: Intent, settings: RunSettings) -> list[tuple[float, fl
         return []
     from intuitf.intent.palette import intent_palette
 
-    return intent_palette(intent, background=tuple(settings.background))
+    r, g, b = (float(c) for c in settings.background)
+    return intent_palette(intent, background=(r, g, b))
 
 
-def _material_hints(intent: Intent, settings: RunSettings, volume) -> list[dict]:
+def _material_hints(intent: Intent, settings: RunSettings, volume: Volume) -> list[dict]:
     """The materials the intent's words name, placed on the volume (see ``RunSettings``)."""
     if not getattr(settings, "material_hints", True):
         return []
     from intuitf.intent.hints import explorer_hints
 
-    return explorer_hints(intent, volume)
+    return explorer_hints(intent, volume, camera=settings.camera or None)
 
 
-def _with_selection(intent: Intent, volume, initial, settings: RunSettings) -> Intent:
+def _with_selection(
+    intent: Intent, volume: Volume, initial: Sequence[GaussianTF], settings: RunSettings
+) -> Intent:
     """An edit intent with its base rendering and the mask of the selected features' pixels."""
     if intent.kind != "edit" or len(initial) != 1:
         return intent
@@ -34,16 +42,16 @@ def _with_selection(intent: Intent, volume, initial, settings: RunSettings) -> I
     return edit_intent(intent, volume, initial[0], settings)
 
 
-def _judge_name(judge) -> str:
+def _judge_name(judge: Any) -> str:
     name = getattr(judge, "name", type(judge).__name__)
     try:
         from intuitf.evaluator.providers import redact_url
     except ImportError:  # pragma: no cover - older evaluator without the helper
         return str(name)
-    return redact_url(str(name))
+    return redact_url(str(name)) or ""
 
 
-def _paid(judge, cost: Cost, rd: RunDirectory | None) -> Cost:
+def _paid(judge: Any, cost: Cost, rd: RunDirectory | None) -> Cost:
     """``cost`` with calls, tokens and money as the run's verdict store recorded them (exact
     across resumes and kills), when the judge keeps its answers there."""
     from intuitf.evaluator.budget import run_spend, with_spend

@@ -44,7 +44,7 @@ def _command_line() -> str:
     argv = list(sys.argv) or ["python"]
     if argv and argv[0].endswith(("__main__.py", "intuitf")):
         argv[0] = "intuitf"
-    return " ".join(redact_url(a) for a in argv)
+    return " ".join(redact_url(a) or "" for a in argv)
 
 
 def _describe(holder: dict) -> str:

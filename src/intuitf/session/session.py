@@ -30,10 +30,11 @@ store answers every one that was already paid for.
 from __future__ import annotations
 
 import asyncio
+import functools
 import hashlib
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from types import MappingProxyType
 from typing import Any
 
@@ -201,7 +202,57 @@ class Session(SessionOpening, SessionInteraction):
         # A private event loop for the synchronous wrappers (step/run): model clients keep
         # connections bound to the loop they were made in.
         self._loop: asyncio.AbstractEventLoop | None = None
+        #: Wrappers around the judge each generation's tournament asks (add_judge_middleware).
+        self._judge_middleware: list[Callable[[Any], Any]] = []
+        #: Called with the seconds of each render job of a generation (on_render).
+        self._render_hooks: list[Callable[[float], None]] = []
         self._refresh()
+
+    # -- hooks ----------------------------------------------------------------------------
+    def add_judge_middleware(self, wrap: Callable[[Any], Any]) -> None:
+        """Put ``wrap(judge)`` around the judge that each generation's tournament asks.
+
+        For code that drives sessions (a rate limiter shared by a worker's runs, a recorder):
+        ``wrap`` takes a judge and returns one with the same ``compare``. Wrappers apply in the
+        order added, the first innermost; the session's pause and cancel gate stays outermost,
+        so a paused run holds no limiter slot. :attr:`judge` itself is left as it is (costs
+        and the verdict store are read from it).
+        """
+        self._judge_middleware.append(wrap)
+
+    def on_render(self, fn: Callable[[float], None]) -> Callable[[], None]:
+        """Call ``fn(seconds)`` after each render job of a generation (the sample cache for
+        the judging camera, the candidates' pictures), with the time the job took on the
+        render thread; returns a function that removes the hook."""
+        self._render_hooks.append(fn)
+
+        def remove() -> None:
+            if fn in self._render_hooks:
+                self._render_hooks.remove(fn)
+
+        return remove
+
+    def _tournament_judge(self) -> Any:
+        judge = self.judge
+        for wrap in self._judge_middleware:
+            judge = wrap(judge)
+        return _GatedJudge(self, judge)
+
+    def _timed(self, job: Callable[[], Any]) -> Callable[[], Any]:
+        """``job`` reporting its duration to the render hooks (none: ``job`` itself)."""
+        if not self._render_hooks:
+            return job
+
+        def timed() -> Any:
+            t = time.perf_counter()
+            try:
+                return job()
+            finally:
+                took = time.perf_counter() - t
+                for fn in list(self._render_hooks):
+                    fn(took)
+
+        return timed
 
     # -- state ----------------------------------------------------------------------------
     @property
@@ -251,7 +302,7 @@ class Session(SessionOpening, SessionInteraction):
             stage=self.stage,
             generation=self.generation,
             generations=self.total_generations,
-            plan=tuple(tuple(p) for p in self.plan),
+            plan=tuple((str(s), int(n)) for s, n in self.plan),
             ranking=tuple(self.last_ranking),
             ratings=MappingProxyType(dict(self.ratings)),
             tfs=MappingProxyType(dict(self.tfs)),
@@ -355,15 +406,18 @@ class Session(SessionOpening, SessionInteraction):
             for c in candidates:
                 self.tfs[c.id] = c.tf
             sched = render_scheduler()
-            cache = await sched.run(self.sample_cache, BATCH)
+            cache = await sched.run(self._timed(self.sample_cache), BATCH)
             todo = [c for c in candidates if c.id not in self._images]
             if getattr(self.renderer, "device", "cpu") == "cuda" and todo:
                 # On the GPU a whole generation renders in one launch.
-                batch = await sched.run(lambda: cache.render_many([c.tf for c in todo]), BATCH)
+                batch = await sched.run(
+                    self._timed(lambda: cache.render_many([c.tf for c in todo])), BATCH
+                )
                 self._images.update({c.id: img for c, img in zip(todo, batch, strict=True)})
             images = []
             for c in candidates:  # one job each, so interactive renders can go between them
-                images.append(await sched.run(lambda c=c: self.image(c.id, c.tf), BATCH))
+                job = self._timed(functools.partial(self.image, c.id, c.tf))
+                images.append(await sched.run(job, BATCH))
             self.events.emit("rendered", generation=g, candidates=ids)
 
             stage_aspects = getattr(self.explorer, "aspects", None) or {
@@ -374,11 +428,11 @@ class Session(SessionOpening, SessionInteraction):
             aspects = _aspects_for_stage(stage_aspects, self.intent)
             prior = {cid: self.ratings[cid] for cid in ids if cid in self.ratings}
             tournament = SwissTournament(
-                _GatedJudge(self, self.judge),
+                self._tournament_judge(),
                 aspects,
                 self.intent,
                 seed=_generation_seed(self.settings.seed, g),
-                protocol=self.settings.protocol,
+                protocol=self.settings.protocol,  # type: ignore[arg-type]  # checked by RunSettings
             )
             history = self.stage_games + self._human_games()
             base_cost = Cost(**self.cost.to_dict())

@@ -13,7 +13,10 @@ import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    import numpy as np
 
 from intuitf.errors import SessionError
 from intuitf.session.lock import in_use
@@ -188,7 +191,7 @@ class RunStore:
     def tree(self) -> list[dict[str, Any]]:
         """Runs nested under the run they branched from: ``{run, generations, children}``."""
         infos = {r.name: r for r in self.runs()}
-        nodes = {
+        nodes: dict[str, dict[str, Any]] = {
             n: {"run": info.to_dict(), "generations": self.history(n), "children": []}
             for n, info in infos.items()
         }
@@ -310,7 +313,7 @@ class RunStore:
         )
         return f"{name}/{cid}"
 
-    def render(self, qid: str, size: int | None = None, volume=None):
+    def render(self, qid: str, size: int | None = None, volume: Any = None) -> np.ndarray:
         """A candidate's rendering from its run's judging camera (uint8 RGB).
 
         The run's volume is read from its spec unless ``volume`` is given.

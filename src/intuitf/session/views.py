@@ -11,12 +11,20 @@ its pictures.
 from __future__ import annotations
 
 import threading
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from intuitf.errors import RenderError
 from intuitf.tf import GaussianTF
+
+if TYPE_CHECKING:
+    from intuitf.render.cache import CacheViews
+    from intuitf.render.camera import Camera
+    from intuitf.render.renderer import VolumeRenderer
+    from intuitf.volume import Volume
 
 #: A feature counts as visible at a pixel when it holds at least this share of its opacity.
 VISIBLE_SHARE = 0.02
@@ -42,16 +50,21 @@ class ViewRenderer:
     ``device`` None renders on the volume's device (its render context's).
     """
 
-    def __init__(self, volume, background=(0.0, 0.0, 0.0), device: str | None = None) -> None:
+    def __init__(
+        self,
+        volume: Volume,
+        background: Sequence[float] = (0.0, 0.0, 0.0),
+        device: str | None = None,
+    ) -> None:
         self.volume = volume
         self.background = tuple(background)
         self.device = device
-        self._renderers: dict[tuple[int, bool], object] = {}
-        self._cache_key = None
-        self._cache = None
+        self._renderers: dict[tuple[int, bool], VolumeRenderer] = {}
+        self._cache_key: tuple[str, int, bool] | None = None
+        self._cache: CacheViews | None = None
         self._lock = threading.Lock()
 
-    def renderer(self, size: int, shading: bool):
+    def renderer(self, size: int, shading: bool) -> VolumeRenderer:
         from intuitf.render import VolumeRenderer
 
         with self._lock:
@@ -67,10 +80,10 @@ class ViewRenderer:
                 self._renderers[(size, shading)] = r
             return r
 
-    def sample_cache(self, camera, size: int, shading: bool):
+    def sample_cache(self, camera: Camera, size: int, shading: bool) -> CacheViews:
         key = (repr(camera.to_dict()), size, shading)
         with self._lock:
-            if self._cache_key == key:
+            if self._cache_key == key and self._cache is not None:
                 return self._cache
         cache = self.renderer(size, shading).sample_cache(camera)
         with self._lock:
@@ -78,15 +91,17 @@ class ViewRenderer:
         return cache
 
     # -- the views ------------------------------------------------------------------------
-    def view(self, tf: GaussianTF, camera, size: int, shading: bool) -> np.ndarray:
+    def view(self, tf: GaussianTF, camera: Camera, size: int, shading: bool) -> np.ndarray:
         """uint8 RGB (size, size, 3) of ``tf`` from ``camera``."""
         return self.renderer(size, shading).render(tf, camera)
 
-    def attribution(self, tf: GaussianTF, camera, size: int, shading: bool) -> np.ndarray:
+    def attribution(self, tf: GaussianTF, camera: Camera, size: int, shading: bool) -> np.ndarray:
         """Each Gaussian's share of each pixel's opacity: float32 (N, size, size)."""
         return self.sample_cache(camera, size, shading).attribution(tf)
 
-    def pick(self, tf: GaussianTF, camera, x: int, y: int, size: int, shading: bool) -> PickResult:
+    def pick(
+        self, tf: GaussianTF, camera: Camera, x: int, y: int, size: int, shading: bool
+    ) -> PickResult:
         """The feature under pixel (x, y): the smallest projected area among the visible ones."""
         if not (0 <= x < size and 0 <= y < size):
             raise RenderError(
@@ -95,7 +110,9 @@ class ViewRenderer:
             )
         return pick_smallest(self.attribution(tf, camera, size, shading), x, y)
 
-    def features(self, tf: GaussianTF, camera, size: int, shading: bool) -> list[np.ndarray]:
+    def features(
+        self, tf: GaussianTF, camera: Camera, size: int, shading: bool
+    ) -> list[np.ndarray]:
         """Each Gaussian rendered alone (over a faint ghost of the whole), in TF order."""
         cache = self.sample_cache(camera, size, shading)
         return [cache.render_feature(tf, i) for i in range(len(tf))]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -66,7 +67,7 @@ def find_materials(counts: np.ndarray, max_materials: int = 5) -> list[Material]
     logc = gaussian_filter1d(np.log1p(fg), max(1.0, n / 128))
     peaks, props = find_peaks(logc, prominence=0.3)
     mats: list[Material] = []
-    order = np.argsort(props["prominences"])[::-1] if len(peaks) else []
+    order: Any = np.argsort(props["prominences"])[::-1] if len(peaks) else []
     for k in order[:max_materials]:
         p = peaks[k]
         lo, hi = max(0, p - n // 32), min(n, p + n // 32 + 1)
