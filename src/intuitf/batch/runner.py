@@ -200,25 +200,17 @@ class _Timing:
         self.render_s = 0.0
         self.judge_s = 0.0
         self._rendered_at: float | None = None
-        image, cache = session.image, session.sample_cache
+        remove = session.on_render(self._rendered)  # the Session's render-timing hook
+        unsubscribe = session.events.subscribe(self._on_event)
 
-        def timed_image(cid, tf):
-            t = time.perf_counter()
-            try:
-                return image(cid, tf)
-            finally:
-                self.render_s += time.perf_counter() - t
+        def both() -> None:
+            remove()
+            unsubscribe()
 
-        def timed_cache():
-            t = time.perf_counter()
-            try:
-                return cache()
-            finally:
-                self.render_s += time.perf_counter() - t
+        self.unsubscribe = both
 
-        session.image = timed_image
-        session.sample_cache = timed_cache
-        self.unsubscribe = session.events.subscribe(self._on_event)
+    def _rendered(self, seconds: float) -> None:
+        self.render_s += seconds
 
     def _on_event(self, e) -> None:
         if e.type == "rendered":
@@ -315,7 +307,8 @@ class WorkerCore:
 
                 attach_shared_budget(session.judge, self.ledger, item.key)
             if self.limiter is not None:
-                session.judge = ThrottledJudge(session.judge, self.limiter)
+                limiter = self.limiter
+                session.add_judge_middleware(lambda judge: ThrottledJudge(judge, limiter))
             timing = _Timing(session)
             if self.stopping:
                 session.cancel()
