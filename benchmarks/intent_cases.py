@@ -128,10 +128,14 @@ def _core_labels(name: str, d: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
         dentin = (d >= 0.5) & (d < 0.77)
         zs = np.nonzero(enamel.any(axis=(1, 2)))[0]
         cej = int(zs.min()) if zs.size else d.shape[0] // 2
+        top = int(zs.max()) if zs.size else d.shape[0] - 1
+        # The crown is what the enamel covers (down to the cemento-enamel junction): its upper
+        # half is the crown top, its lower half (enamel and dentin) the crown middle.
+        mid = (cej + top) // 2
         z = np.arange(d.shape[0])[:, None, None]
-        lab[dentin & (z >= cej)] = 2
+        lab[(dentin | enamel) & (z >= cej)] = 2
         lab[dentin & (z < cej)] = 3
-        lab[enamel] = 1
+        lab[enamel & (z >= mid)] = 1
         return lab, {"crown top": 1, "crown middle": 2, "root": 3}
     if name == "engine":
         lab[(d >= 0.19) & (d < 0.66)] = 1

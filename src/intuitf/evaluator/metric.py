@@ -35,8 +35,9 @@ aspect key                     measure (higher is better unless noted)
                                foregrounds, minus the distance of their mean colours / 100
 ``structural_style_matching``  SSIM of the luminance to the reference's, both resized to
                                128 x 128
-``stroke_color_agreement``     minus the mean CIE76 ΔE between the rendering and the stroke
-                               colours where the sketch's alpha > 0
+``stroke_color_agreement``     minus the mean over strokes (the pixels of one colour) of
+                               the mean CIE76 ΔE between the rendering and the stroke's
+                               colour where the sketch's alpha > 0
 ``unmarked_preservation``      minus the mean ΔE to the base rendering where alpha == 0
 ``edit_instruction_alignment`` in the region (``intent.selection_mask``: the pixels the
                                selected features cover in the base; else the sketch's alpha;
@@ -350,10 +351,16 @@ class MetricJudge:
         return float(structural_similarity(f.gray128, r.gray128, data_range=1.0))
 
     def _stroke(self, f: _Features, intent: Intent) -> float | None:
+        """Minus the mean over strokes (pixels of one colour) of their mean ΔE: each stroke
+        counts alike, so a long stroke cannot hide a short one in the wrong colour."""
         mask, stroke_lab = _strokes(intent, f.lab.shape[:2])
         if mask is None or not mask.any():
             return None
-        return -float(np.linalg.norm(f.lab[mask] - stroke_lab[mask], axis=1).mean())
+        de = np.linalg.norm(f.lab - stroke_lab, axis=2)
+        keys = np.round(stroke_lab[mask] / 4.0).astype(np.int64)
+        _, which = np.unique(keys, axis=0, return_inverse=True)
+        per = np.bincount(which.ravel(), weights=de[mask]) / np.bincount(which.ravel())
+        return -float(per.mean())
 
     def _preserve(self, f: _Features, intent: Intent) -> float | None:
         if intent.base is None:

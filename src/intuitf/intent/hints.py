@@ -694,7 +694,7 @@ def _edit_hint(text: str) -> MaterialHint:
 
 
 def explorer_hints(
-    intent: Intent, volume=None, structures: StructureMap | None = None
+    intent: Intent, volume=None, structures: StructureMap | None = None, camera=None
 ) -> list[dict]:
     """The hints the Explorer takes for ``intent`` on ``volume`` (empty: none understood).
 
@@ -702,10 +702,17 @@ def explorer_hints(
     hint of their own: hidden, unless the words name air. Nobody asks for the empty space
     around the object to be painted, and a faint Gaussian there is a veil over the whole
     volume box. (An edit changes selected features only: it gets no background hint.)
+
+    A sketch, with the ``camera`` its base picture was rendered from (a ``Camera`` or its
+    dict), gives a hint per stroke: its colour on the values under it
+    (:func:`intuitf.intent.strokes.stroke_hints`).
     """
     th = intent_hints(intent, volume, structures)
     out = [h.to_explorer() for h in th.hints if h.center is not None or intent.kind == "edit"]
     placed = [h for h in th.hints if h.center is not None]
+    if intent.kind == "sketch" and intent.sketch is not None and volume is not None and camera:
+        out += [h.to_explorer() for h in _stroke_hints(intent, volume, camera)]
+        placed = placed + [_with_place(h) for h in _stroke_hints(intent, volume, camera)]
     if intent.kind != "edit" and volume is not None and not any(h.role == "air" for h in placed):
         counts, _ = volume.histogram()
         layout = _Layout.of(np.asarray(counts, dtype=np.float64), _materials(counts))
@@ -718,6 +725,23 @@ def explorer_hints(
                  "color": None, "height": None, "hidden": True}
             )  # fmt: skip
     return out
+
+
+def _stroke_hints(intent: Intent, volume, camera) -> list:
+    from intuitf.intent.strokes import stroke_hints
+    from intuitf.render.camera import Camera
+    from intuitf.tf.defaults import background_cutoff
+
+    cam = camera if isinstance(camera, Camera) else Camera.from_dict(dict(camera))
+    counts, _ = volume.histogram()
+    cut = background_cutoff(np.asarray(counts, dtype=np.float64))
+    return stroke_hints(intent.sketch, volume.data, tuple(volume.spacing), cam, cut)
+
+
+def _with_place(h) -> MaterialHint:
+    """A stroke hint seen as a placed material (for the background's reach)."""
+    return MaterialHint(clause="", material="stroke", words="stroke", center=h.center,
+                        spread=h.spread, placed_by="stroke")  # fmt: skip
 
 
 def _materials(counts):

@@ -1,0 +1,85 @@
+"""Sketch strokes land on the structures under them (through the base picture's camera)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from intuitf.evaluator.metric import MetricJudge
+from intuitf.evaluator.types import Intent
+from intuitf.intent.hints import explorer_hints
+from intuitf.intent.strokes import stroke_hints, strokes_of
+from intuitf.render import Camera, VolumeRenderer
+from intuitf.tf import Gaussian, GaussianTF
+from intuitf.volume import Volume
+
+
+def two_blocks() -> Volume:
+    """Two blocks side by side along x: values 0.4 (low x) and 0.8 (high x), in air."""
+    d = np.full((40, 40, 40), 0.02, np.float32)
+    d[10:30, 10:30, 6:20] = 0.4
+    d[10:30, 10:30, 20:34] = 0.8
+    return Volume.from_array(d, value_range=(0.0, 1.0))
+
+
+def sketch_over(vol: Volume, cam: Camera, size: int = 64) -> np.ndarray:
+    """Red strokes over the left block's pixels, blue over the right one's, as seen from cam."""
+    tf = GaussianTF((Gaussian(0.4, 0.03, 0.8, (1, 1, 1)), Gaussian(0.8, 0.03, 0.8, (1, 1, 1))))
+    r = VolumeRenderer(vol, size=size, shading=False)
+    left = r.render_rgba(GaussianTF((tf.gaussians[0],)), cam)[..., 3] > 0.5
+    right = r.render_rgba(GaussianTF((tf.gaussians[1],)), cam)[..., 3] > 0.5
+    sk = np.zeros((size, size, 4), np.uint8)
+    row = size // 2
+    for mask, colour in ((left & ~right, (220, 30, 30)), (right, (40, 80, 220))):
+        band = np.zeros_like(mask)
+        band[row - 2 : row + 3] = True
+        band &= mask
+        sk[band, :3], sk[band, 3] = colour, 255
+    return sk
+
+
+def test_each_stroke_goes_to_the_values_under_it():
+    vol = two_blocks()
+    cam = Camera(azimuth=0.0, elevation=0.0)  # x to the right: the 0.4 block on the left
+    sk = sketch_over(vol, cam)
+    assert len(strokes_of(sk)) == 2
+    got = {
+        tuple(round(c, 2) for c in h.rgb): h
+        for h in stroke_hints(sk, vol.data, vol.spacing, cam, 0.1)
+    }
+    red, blue = got[(0.86, 0.12, 0.12)], got[(0.16, 0.31, 0.86)]
+    assert abs(red.center - 0.4) < 0.05 and abs(blue.center - 0.8) < 0.05
+    assert red.hit_share > 0.9 and blue.hit_share > 0.9
+    # Seen from the other side the same strokes land on the other block.
+    back = Camera(azimuth=180.0, elevation=0.0)
+    flipped = {tuple(round(c, 2) for c in h.rgb): h
+               for h in stroke_hints(sk, vol.data, vol.spacing, back, 0.1)}  # fmt: skip
+    assert abs(flipped[(0.86, 0.12, 0.12)].center - 0.8) < 0.05
+
+
+def test_a_sketch_intent_gives_the_explorer_its_strokes():
+    vol = two_blocks()
+    cam = Camera(azimuth=0.0, elevation=0.0)
+    sk = sketch_over(vol, cam)
+    base = np.zeros((64, 64, 3), np.uint8)
+    hints = explorer_hints(Intent(kind="sketch", sketch=sk, base=base), vol, camera=cam.to_dict())
+    strokes = sorted((h for h in hints if h["name"] == "stroke"), key=lambda h: h["center"])
+    assert len(strokes) == 2
+    assert strokes[0]["color"][0] > 0.8 and strokes[1]["color"][2] > 0.8
+
+
+def test_the_metric_judge_measures_each_stroke_alike():
+    # A long red stroke all right and a short blue one all wrong lose to both mostly right:
+    # the mean is taken per stroke, not per pixel (by pixels the short stroke would not count).
+    sk = np.zeros((32, 32, 4), np.uint8)
+    sk[5:25, 2:30] = (220, 30, 30, 255)  # long red
+    sk[28:30, 2:6] = (40, 80, 220, 255)  # short blue
+    base = np.zeros((32, 32, 3), np.uint8)
+    intent = Intent(kind="sketch", sketch=sk, base=base)
+    red_only = np.zeros((32, 32, 3), np.uint8)
+    red_only[...] = (220, 30, 30)
+    both = red_only.copy()
+    both[20:32] = (40, 80, 220)  # a quarter of the red stroke wrong, the blue one right
+    j = MetricJudge()
+    assert j.score(both, "stroke_color_agreement", intent) > j.score(
+        red_only, "stroke_color_agreement", intent
+    )
