@@ -50,11 +50,11 @@ def make_judge(
     from intuitf.evaluator.mllm import MLLMJudge
 
     if spec.startswith(("http://", "https://")):
-        url, _, model = spec.partition("#")
+        url, _, named = spec.partition("#")
         options.pop("base_url", None)  # the spec is the URL
-        model = model or options.pop("model", None) or None  # None: GET /v1/models says
+        served = named or options.pop("model", None) or None  # None: GET /v1/models says
         options.pop("model", None)
-        return MLLMJudge(model, base_url=url, cache=cache, budget=budget, **options)
+        return MLLMJudge(served, base_url=url, cache=cache, budget=budget, **options)
     provider, _, model = spec.partition(":")
     provider = provider.lower()
     if provider not in PROVIDERS:

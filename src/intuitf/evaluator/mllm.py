@@ -251,14 +251,16 @@ class MLLMJudge:
         self.cache = cache
         self.budget = budget
         self.prices = prices or PriceTable().with_prices(config_prices())
-        self._price = tuple(float(x) for x in price) if price is not None else None
-        if self._price is not None:
-            if len(self._price) != 2 or min(self._price) < 0:
+        given = [float(x) for x in price] if price is not None else None
+        self._price: tuple[float, float] | None = None
+        if given is not None:
+            if len(given) != 2 or min(given) < 0:
                 raise JudgeError(
                     f"A model's price is two numbers of 0 or more (got {list(price or [])}).",
                     "Give USD per million input tokens and per million output tokens, e.g. "
                     "--price 0.75,4.50.",
                 )
+            self._price = (given[0], given[1])
             self.prices = self.prices.with_prices({self.model: self._price})
         self.unpriced = bool(unpriced)
         self.temperature = float(temperature)
@@ -596,8 +598,9 @@ class MLLMJudge:
                     ) from None
                 last = f"HTTP {status}"
                 hint = _retry_after(exc.response, getattr(exc, "body", None))
-                wait = self._backoff(attempt, hint)
-                if status in (429, 503, 529):
+                overloaded = status in (429, 503, 529)
+                wait = self._backoff(limited if overloaded else attempt, hint)
+                if overloaded:
                     limit.overloaded()
                     if status == 429:
                         self.rate_limited += 1

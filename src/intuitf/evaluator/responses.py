@@ -130,11 +130,11 @@ def _retry_after(response: Any, body: Any = None) -> float | None:
                     return max(0.0, when.timestamp() - time.time())
                 except (TypeError, ValueError):
                     pass
-        resets = [
+        found = [
             _duration(headers.get(h) or "")
             for h in ("x-ratelimit-reset-requests", "x-ratelimit-reset-tokens")
         ]
-        resets = [r for r in resets if r is not None]
+        resets = [r for r in found if r is not None]
         if resets:
             return max(resets)
     return _retry_delay(body)
