@@ -1,26 +1,37 @@
-"""The web app under load: view frames, the first gallery update and event delivery, measured
-against a real ``uvicorn`` on a free loopback port while a run renders its generations.
+"""The volume view in the browser: the page's own WebGL2 frames, pick and first picture, and the
+server's stills, on a real volume (the bonsai by default).
 
-Run: ``python benchmarks/web.py`` (options: ``--volume ID``, ``--data DIR``, ``--population``,
-``--image-size``, ``--frames``, ``--stills``). The server runs in its own process (as
-``intuitf serve`` does); this process is the client: an SSE reader and a WebSocket client.
+Run: ``python benchmarks/web.py`` (options: ``--volume ID``, ``--data DIR`` (default
+``$INTUITF_DATA`` or ``../shared/data/volumes``), ``--frames N``, ``--stills N``,
+``--quick``). A real ``intuitf serve`` app runs in its own process on a free loopback port;
+this process drives headless Chromium (Debian's ``chromium``, Playwright) against it and asks
+the server for stills over the view socket.
 
-Measured, all while the run is going (and again with no run, for comparison):
+Measured, with the browser's own clock (``performance.now`` around a draw that waits for its
+pixels):
 
-- drag frames: ``quality: "drag"`` for a 256-pixel view (a 128² JPEG, or 96² / 64² when the
-  server's adaptive level of detail finds the machine too slow for its 40 ms budget; the sides
-  are printed; ``--no-lod`` keeps 128²), the next request sent as soon as a frame arrives (one
-  in flight, as the page does): request → picture, median / p90;
-- full stills: 256² shaded PNG, request → picture;
-- first gallery update: from ``POST /api/runs`` to the first ``generation_ended`` event;
-- event delivery: the event's own time (set when the run emitted it) to its receipt here.
+- **first picture**: from choosing the volume in the page's picker to its first full frame
+  (texture fetched, block ranges computed, uploaded, shader compiled, drawn);
+- **frames while dragging**: the page's renderer drawing the current TF at 256² and 512², the
+  camera turning 4° a frame (as a drag does), shaded, median / p90; and the frames the page
+  itself drew during a real mouse drag of the view (their side: in software only, the page
+  lowers it when a frame is over its budget, and says so on screen);
+- **after a hand edit**: a Gaussian's height and colour changed, then a frame (the LUT and the
+  block visibility rebuilt, then drawn);
+- **click → outline**: a click on the view to the selection's outline on screen (the page's
+  attribution pass on the GPU, the smallest-area rule, the outline drawn);
+- **shader cost per sample**: a TF that keeps every sample visible and never ends a ray early,
+  so every ray walks its whole length; the sample count comes from the server's
+  ``kernels.count_samples`` for the same camera (same rays, same step);
+- **server stills**: 256² and 512² shaded, the server's own render time (frame header
+  ``render_ms``), no run going.
 
-The "server" column is the frame header's ``ms``: the server's own time from the parsed request
-to the encoded picture, without the socket; "wait" of it waiting for the render worker (behind
-a tournament render), "render" the render itself (medians).
+Headless Chromium here renders WebGL2 in software (SwiftShader) on the machine's cores: its
+figures bound any GPU's from above. The cost per sample lets one estimate a GPU: a laptop GPU
+does on the order of 10⁹–10¹⁰ samples a second where SwiftShader does about 10⁸.
 
-Targets on the 2-core reference machine: drag median < 50 ms, full still < 150 ms, events
-< 200 ms, all while a run is going.
+Targets on the 2-core reference machine, in software: 256² frame ≤ 200 ms, 512² ≤ 600 ms,
+click → outline ≤ 300 ms, first picture ≤ 3 s; server 512² shaded still ≤ 500 ms idle.
 """
 
 from __future__ import annotations
@@ -28,21 +39,30 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import statistics
 import subprocess
 import sys
 import tempfile
-import threading
 import time
+from pathlib import Path
 
 import httpx
 
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+]
+DEFAULT_DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "volumes"
 
-def serve(port: int, runs: str, token: str, data: str | None, budget: float | None) -> None:
-    """The server process: ``intuitf serve`` without a browser, on ``port``."""
+
+def serve(port: int, runs: str, token: str, data: str | None) -> None:
+    """The server process: the app as ``intuitf serve`` runs it, on ``port``."""
     from intuitf.web.app import create_app, make_server
 
-    app = create_app(runs, [], data or None, token=token, drag_budget_ms=budget,
+    app = create_app(runs, [], data or None, token=token,
                      allowed_hosts=[f"127.0.0.1:{port}", f"localhost:{port}"])  # fmt: skip
     make_server(app, "127.0.0.1", port).run()
 
@@ -64,115 +84,122 @@ def pct(values: list[float], q: float) -> float:
     return v[lo] + (v[hi] - v[lo]) * (k - lo)
 
 
-class EventReader(threading.Thread):
-    """Reads a run's SSE stream; keeps (event, receipt time)."""
-
-    def __init__(self, base: str, headers: dict, run: str) -> None:
-        super().__init__(daemon=True)
-        self.base, self.headers, self.run_name = base, headers, run
-        self.events: list[tuple[dict, float]] = []
-        self.first_gallery: float | None = None
-        self.stop = False
-
-    def run(self) -> None:
-        with httpx.Client(base_url=self.base, headers=self.headers, timeout=None) as c:
-            with c.stream("GET", f"/api/runs/{self.run_name}/events?since=0") as r:
-                data = None
-                for line in r.iter_lines():
-                    if self.stop:
-                        return
-                    if line.startswith("data: "):
-                        data = line[6:]
-                    elif not line and data:
-                        now = time.time()
-                        e = json.loads(data)
-                        self.events.append((e, now))
-                        if e["type"] == "generation_ended" and self.first_gallery is None:
-                            self.first_gallery = now
-                        if e["type"] == "run_ended":
-                            return
-                        data = None
-
-
-#: The sides of the frames each measurement got (drag frames adapt theirs to the machine).
-SIDES: dict[str, list[list[int]]] = {}
-
-
-def frames(ws_url: str, target: dict, quality: str, n: int, shaded: bool = True):
-    """Round-trip times (ms) of ``n`` requests, each sent when the previous frame arrived,
-    and the server's own times (the headers' ``ms``)."""
-    server_ms: list[float] = []
-    waits: list[float] = []
-    renders: list[float] = []
-    sides: list[int] = []
+def server_stills(ws_url: str, target: dict, size: int, n: int) -> list[float]:
+    """The server's render time (ms) of ``n`` full shaded stills at ``size``² (after one warm-up)."""
     from websockets.sync.client import connect
 
     out = []
     with connect(ws_url, open_timeout=30, max_size=None) as ws:
         for i in range(n + 1):
-            req = {"req": i, "target": target, "size": 256, "shaded": shaded,
-                   "background": [0, 0, 0], "quality": quality,
-                   "camera": {"azimuth": (7 * i) % 360, "elevation": 10 + (i % 5)}}  # fmt: skip
-            t = time.perf_counter()
+            req = {"req": i, "target": target, "size": size, "shaded": True,
+                   "background": [0, 0, 0], "quality": "full",
+                   "camera": {"azimuth": 30 + 7 * i, "elevation": 20}}  # fmt: skip
             ws.send(json.dumps(req))
-            head = json.loads(ws.recv(timeout=60))
+            head = json.loads(ws.recv(timeout=120))
             if "error" in head:
                 raise RuntimeError(head)
-            ws.recv(timeout=60)
-            if i:  # the first frame warms the socket and the target up
-                out.append((time.perf_counter() - t) * 1000.0)
-                server_ms.append(float(head["ms"]))
-                waits.append(float(head.get("wait_ms", 0.0)))
-                renders.append(float(head.get("render_ms", 0.0)))
-                sides.append(int(head["width"]))
-    SIDES[quality] = SIDES.get(quality, []) + [sides]
-    return out, server_ms, waits, renders
+            ws.recv(timeout=120)
+            if i:
+                out.append(float(head["render_ms"]))
+    return out
+
+
+#: In the page: the renderer drawing the current TF from turning cameras at one size.
+FRAMES_JS = """async ({size, n, shading}) => {
+  const g = window.intuitfDebug.gl.renderer();
+  const S = await import('/static/state.js');
+  const tf = S.shownTF();
+  const cam = {...window.intuitfDebug.state.camera, pan: [0, 0]};
+  g.render({tf, camera: cam, width: size, height: size, shading});  // warm
+  const ms = [];
+  for (let i = 0; i < n; i++) {
+    cam.azimuth = (cam.azimuth + 4) % 360;
+    ms.push(g.render({tf, camera: cam, width: size, height: size, shading}));
+  }
+  return ms;
+}"""
+
+#: In the page: a hand edit (height and colour of one Gaussian), then one frame, n times.
+EDIT_JS = """async ({size, n}) => {
+  const g = window.intuitfDebug.gl.renderer();
+  const S = await import('/static/state.js');
+  const base = S.shownTF();
+  const cam = {...window.intuitfDebug.state.camera, pan: [0, 0]};
+  const ms = [];
+  for (let i = 0; i < n; i++) {
+    const tf = JSON.parse(JSON.stringify(base));
+    const k = i % tf.gaussians.length;
+    tf.gaussians[k].height = Math.min(1, tf.gaussians[k].height * (1.1 + 0.05 * i));
+    tf.gaussians[k].color = [0.2 + 0.05 * i % 0.8, 0.5, 0.9];
+    const t0 = performance.now();
+    g.render({tf, camera: cam, width: size, height: size, shading: true});
+    ms.push(performance.now() - t0);
+  }
+  return ms;
+}"""
+
+#: In the page: every sample visible, no early end; the frame's time.
+DENSE_JS = """async ({size, shading, camera}) => {
+  const g = window.intuitfDebug.gl.renderer();
+  const tf = {gaussians: [{mean: 0.5, width: 0.5, height: 0.001, color: [0.8, 0.8, 0.8]}]};
+  g.render({tf, camera, width: size, height: size, shading});
+  const ms = [];
+  for (let i = 0; i < 3; i++) ms.push(g.render({tf, camera, width: size, height: size, shading}));
+  ms.sort((a, b) => a - b);
+  return ms[1];
+}"""
+
+
+def samples_on_rays(volume_path: Path, camera: dict, size: int) -> int:
+    """How many samples the rays of ``camera`` at ``size``² take (the server's count)."""
+    import numpy as np
+
+    from intuitf.render import Camera, VolumeRenderer, kernels
+    from intuitf.volume import load_volume
+
+    r = VolumeRenderer(load_volume(volume_path), size=size, device="cpu")
+    counts = np.zeros(size * size, dtype=np.int64)
+    dims = np.asarray(r.volume.dims, dtype=np.int64)
+    frame = r.frame(Camera.from_dict(camera)).packed()
+    kernels.count_samples(frame, r._spacing, dims, r.sample_distance, counts)
+    return int(counts.sum())
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--volume", default="phantom", help="volume id (default: phantom)")
-    ap.add_argument("--data", default=None, help="folder of volumes to offer")
-    ap.add_argument("--population", type=int, default=16)
-    ap.add_argument("--image-size", type=int, default=128)
-    ap.add_argument("--generations", type=int, default=60)
-    ap.add_argument("--frames", type=int, default=40, help="drag frames per measurement")
-    ap.add_argument("--stills", type=int, default=12, help="full stills per measurement")
-    ap.add_argument(
-        "--no-lod",
-        action="store_true",
-        help="drag frames always 128² (no adaptive level of detail)",
-    )
-    ap.add_argument("--serve", nargs=5, metavar=("PORT", "RUNS", "TOKEN", "DATA", "BUDGET"),
+    ap.add_argument("--volume", default="bonsai", help="volume id (default: bonsai)")
+    ap.add_argument("--data", default=os.environ.get("INTUITF_DATA") or str(DEFAULT_DATA),
+                    help="folder of volumes to offer")  # fmt: skip
+    ap.add_argument("--frames", type=int, default=12, help="page frames per measurement")
+    ap.add_argument("--stills", type=int, default=6, help="server stills per size")
+    ap.add_argument("--quick", action="store_true", help="few frames and stills")
+    ap.add_argument("--shots", default=None, help="folder for screenshots of the page")
+    ap.add_argument("--serve", nargs=4, metavar=("PORT", "RUNS", "TOKEN", "DATA"),
                     help=argparse.SUPPRESS)  # fmt: skip
     args = ap.parse_args()
     if args.serve:
-        port, runs, token, data, budget = args.serve
-        serve(int(port), runs, token, None if data == "-" else data,
-              None if budget == "-" else float(budget))  # fmt: skip
+        port, runs, token, data = args.serve
+        serve(int(port), runs, token, None if data == "-" else data)
         return
+    if args.quick:
+        args.frames, args.stills = 4, 2
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    if chromium is None:
+        raise SystemExit("benchmarks/web.py needs Debian's chromium on PATH")
 
-    load_before = os.getloadavg()[0]
+    load_before = os.getloadavg()
     port, token = free_port(), "bench-token"
     runs = tempfile.mkdtemp(prefix="intuitf-web-bench-")
     server = subprocess.Popen(
-        [
-            sys.executable,
-            __file__,
-            "--serve",
-            str(port),
-            runs,
-            token,
-            args.data or "-",
-            "-" if args.no_lod else "40",
-        ],
+        [sys.executable, __file__, "--serve", str(port), runs, token, args.data or "-"],
         env={**os.environ, "PYTHONUNBUFFERED": "1"},
     )
     base = f"http://127.0.0.1:{port}"
     ws_url = f"ws://127.0.0.1:{port}/api/view?token={token}"
-    headers = {"Authorization": f"token {token}"}
+    res: dict = {}
     try:
-        with httpx.Client(base_url=base, headers=headers, timeout=120) as c:
+        with httpx.Client(base_url=base, headers={"Authorization": f"token {token}"},
+                          timeout=120) as c:  # fmt: skip
             deadline = time.monotonic() + 60
             while True:
                 try:
@@ -183,85 +210,161 @@ def main() -> None:
                 if time.monotonic() > deadline or server.poll() is not None:
                     raise SystemExit("the server did not start")
                 time.sleep(0.1)
-            # A warm-up: volume loaded, kernels compiled, before anything is timed.
-            from intuitf.tf.defaults import default_tf
-
+            vols = {v["id"]: v for v in c.get("/api/volumes").json()}
+            if args.volume not in vols:
+                raise SystemExit(f"no volume {args.volume!r}: the server offers {sorted(vols)}")
             hist = c.get(f"/api/volumes/{args.volume}/histogram").json()
-            import numpy as np
-
-            counts = np.exp(np.asarray(hist["counts"]) * 10.0)
-            tf = default_tf(counts, tuple(hist["value_range"])).to_dict()
-            target = {"volume": args.volume, "tf": tf}
-            frames(ws_url, target, "drag", 3)
-            frames(ws_url, target, "full", 3)
-
-            settings = {"population": args.population, "image_size": args.image_size,
-                        "generations": args.generations}  # fmt: skip
-            t_post = time.time()
-            r = c.post("/api/runs", json={"volume": args.volume, "settings": settings,
-                                          "intent": "opaque white bone, faint red skin"})  # fmt: skip
-            r.raise_for_status()
-            name = r.json()["name"]
-            reader = EventReader(base, headers, name)
-            reader.start()
-            while reader.first_gallery is None:
-                if time.time() - t_post > 300:
-                    raise SystemExit("no generation ended within 5 minutes")
-                time.sleep(0.01)
-            first_gallery = reader.first_gallery - t_post
-            # The run's best so far: the same TF is measured with the run going and without.
-            qid = c.get(f"/api/runs/{name}").json()["gallery"][0]["qid"]
-            view = {"candidate": qid}
-            busy_drag = frames(ws_url, view, "drag", args.frames)
-            busy_full = frames(ws_url, view, "full", args.stills)
-            detail = c.get(f"/api/runs/{name}").json()
-            gens_during = detail["progress"]["generation"] - 1
-            still_running = detail["info"]["status"] == "running"
-            c.post(f"/api/runs/{name}/cancel")
-            reader.join(timeout=60)
-            while c.get(f"/api/runs/{name}").json()["info"]["status"] == "running":
-                time.sleep(0.1)
-            idle_drag = frames(ws_url, view, "drag", args.frames)
-            idle_full = frames(ws_url, view, "full", args.stills)
-            delays = [(now - e["time"]) * 1000.0 for e, now in reader.events
-                      if e["time"] >= t_post]  # fmt: skip
+        res.update(browser_part(base, token, args, chromium, hist))
+        target = {"volume": args.volume, "tf": res.pop("tf")}
+        for size in (256, 512):
+            res[f"server {size}"] = server_stills(ws_url, target, size, args.stills)
+        volume_path = next(Path(args.data).glob(f"{args.volume}_*")) if args.data else None
+        if volume_path is not None:
+            for size in (256, 512):
+                res[f"samples {size}"] = samples_on_rays(volume_path, res["camera"], size)
     finally:
         server.terminate()
         try:
-            server.wait(timeout=30)
+            server.wait(timeout=20)
         except subprocess.TimeoutExpired:
             server.kill()
+    report(args, res, load_before, os.getloadavg())
 
-    def row(what, values, target_ms):
-        extra = ""
-        if isinstance(values, tuple):
-            values, server_ms, waits, renders = values
-            extra = "".join(f"{statistics.median(v):>9.1f}" for v in (server_ms, waits, renders))
-        med, p90 = statistics.median(values), pct(values, 0.9)
-        ok = "" if target_ms is None else ("yes" if med < target_ms else "NO")
-        t = "" if target_ms is None else f"< {target_ms:.0f}"
-        print(f"{what:<44}{len(values):>4}{med:>8.1f}{p90:>8.1f}{max(values):>8.1f}"
-              f"{t:>7}{ok:>5}{extra}")  # fmt: skip
 
+def browser_part(base: str, token: str, args, chromium: str, hist: dict) -> dict:
+    from playwright.sync_api import sync_playwright
+
+    out: dict = {}
+    with sync_playwright() as pw:
+        b = pw.chromium.launch(executable_path=chromium, headless=True, args=CHROMIUM_ARGS)
+        page = b.new_page(viewport={"width": 1440, "height": 900})
+        page.set_default_timeout(120_000)
+        page.goto(f"{base}/?token={token}")
+        page.wait_for_selector("body.ready")
+        out["gpu"] = page.evaluate("window.intuitfDebug.gl.renderer()?.gpu || 'no WebGL2'")
+        # First picture after choosing the volume (the page's own clock, from the choice).
+        t = time.perf_counter()
+        page.select_option("#volume-select", args.volume)
+        page.wait_for_function(
+            "id => window.intuitfDebug.gl.stats.firstPicture[id] !== undefined", arg=args.volume
+        )
+        out["first picture wall"] = (time.perf_counter() - t) * 1000.0
+        stats = page.evaluate("window.intuitfDebug.gl.stats")
+        out["first picture"] = stats["firstPicture"][args.volume]
+        out["load"] = stats["loadMs"][args.volume]
+        out["tf"] = page.evaluate("import('/static/state.js').then(S => S.shownTF())")
+        out["camera"] = page.evaluate("window.intuitfDebug.state.camera")
+        out["view size"] = page.evaluate("Number(document.getElementById('view-canvas').width)")
+        for size in (256, 512):
+            for shading in (True, False):
+                key = f"page {size} {'shaded' if shading else 'unshaded'}"
+                out[key] = page.evaluate(
+                    FRAMES_JS, {"size": size, "n": args.frames, "shading": shading}
+                )
+        out["page edit 256"] = page.evaluate(EDIT_JS, {"size": 256, "n": args.frames})
+        out["page edit 512"] = page.evaluate(EDIT_JS, {"size": 512, "n": args.frames})
+        for size in (256, 512):
+            for shading in (True, False):
+                out[f"dense {size} {'shaded' if shading else 'unshaded'}"] = page.evaluate(
+                    DENSE_JS, {"size": size, "shading": shading, "camera": out["camera"]}
+                )
+        # A real drag of the view: the frames the page drew, and their sides.
+        box = page.locator("#view-canvas").bounding_box()
+        cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+        page.evaluate("window.__drag = []")
+        page.evaluate(
+            "() => { const c = document.getElementById('view-canvas');"
+            " new MutationObserver(() => { const s = window.intuitfDebug.gl.stats.last;"
+            " if (s) window.__drag.push(s); }).observe(c, {attributes: true,"
+            " attributeFilter: ['data-frames']}); }"
+        )
+        page.mouse.move(cx, cy)
+        page.mouse.down()
+        for i in range(args.frames * 2):
+            page.mouse.move(cx + 8 * (i + 1), cy + 2 * (i + 1))
+            page.wait_for_timeout(40)
+        if args.shots:
+            Path(args.shots).mkdir(parents=True, exist_ok=True)
+            page.screenshot(path=str(Path(args.shots) / f"{args.volume}_drag.png"))
+        page.mouse.up()
+        page.wait_for_timeout(300)
+        drags = page.evaluate("window.__drag")
+        out["drag frames"] = [d for d in drags if d["quality"] == "drag"]
+        out["drag note"] = page.inner_text("#view-note")
+        page.wait_for_function(
+            "() => document.getElementById('view-canvas').dataset.quality === 'full'"
+        )
+        # Click → outline on the view's own picture (the page picks: attribution on the GPU).
+        # The page runs the attribution pass once the view rests; a click after that finds it.
+        page.wait_for_function("() => window.intuitfDebug.gl.stats.prepared !== undefined")
+        out["attribution"] = page.evaluate("window.intuitfDebug.gl.stats.prepared.ms")
+        page.evaluate("window.intuitfDebug.gl.stats.clickToOutlineMs = undefined")
+        t = time.perf_counter()
+        page.mouse.click(cx, cy)
+        page.wait_for_function(
+            "() => window.intuitfDebug.gl.stats.clickToOutlineMs !== undefined"
+            " || document.getElementById('pick-info').textContent.startsWith('Nothing')"
+        )
+        out["click wall"] = (time.perf_counter() - t) * 1000.0
+        out["click"] = page.evaluate("window.intuitfDebug.gl.stats.clickToOutlineMs ?? null")
+        out["pick info"] = page.inner_text("#pick-info")
+        if args.shots:
+            page.screenshot(path=str(Path(args.shots) / f"{args.volume}_pick.png"))
+        b.close()
+    return out
+
+
+def report(args, res: dict, load_before, load_after) -> None:
+    def row(label: str, values, target=None, unit="ms") -> None:
+        if not isinstance(values, list):
+            values = [values]
+        values = [v for v in values if v is not None]
+        if not values:
+            print(f"| {label} | – | – | {target or ''} |")
+            return
+        med = statistics.median(values)
+        p90 = pct(values, 0.9)
+        mark = "" if target is None else (" ✓" if med <= target else " ✗")
+        tgt = "" if target is None else f"≤ {target} {unit}"
+        print(f"| {label} | {med:.0f} | {p90:.0f} | {tgt}{mark} |")
+
+    print(
+        f"volume {args.volume}; the page's view {res['view size']}²; WebGL2 renderer: {res['gpu']}"
+    )
+    print(f"load average before {load_before[0]:.2f}, after {load_after[0]:.2f} "
+          f"(on {os.cpu_count()} cores; figures from a loaded machine are upper bounds)")  # fmt: skip
     print()
-    print(f"volume {args.volume}; run: population {args.population}, image {args.image_size}², "
-          f"metric judge; {os.cpu_count()} cores; load average at the end "
-          f"{os.getloadavg()[0]:.1f} (before the start {load_before:.1f})")  # fmt: skip
-    print(f"{'measure (ms)':<44}{'n':>4}{'median':>8}{'p90':>8}{'max':>8}{'target':>7}"
-          f"{'met':>5}{'server':>9}{'wait':>9}{'render':>9}")  # fmt: skip
-    row("drag frame JPEG, run going", busy_drag, 50)
-    row("full still 256² shaded PNG, run going", busy_full, 150)
-    row("drag frame JPEG, same TF, no run", idle_drag, None)
-    row("full still 256² shaded PNG, same TF, no run", idle_full, None)
-    row("event delivery (event time -> receipt)", delays, 200)
-    print(f"{'first gallery update (POST -> gen 0 ended)':<44}{1:>4}"
-          f"{first_gallery * 1000:>8.0f}")  # fmt: skip
-    for label, runs_ in (("run going", SIDES["drag"][1]), ("no run", SIDES["drag"][2])):
-        counts = {side: runs_.count(side) for side in sorted(set(runs_), reverse=True)}
-        print(f"drag frame sides, {label}: " + ", ".join(f"{k}²×{v}" for k, v in counts.items()))
-    print(f"view: the run's best candidate after its first generation ({qid}); generations the "
-          f"run finished while frames were measured: {gens_during}; still going at the end: "
-          f"{still_running}")  # fmt: skip
+    print("| measurement | median ms | p90 ms | target |")
+    print("|---|---|---|---|")
+    row("first picture after choosing the volume", res["first picture wall"], 3000)
+    row("  of which in the page: texture fetched, blocks, uploaded, drawn", res["first picture"])
+    row("  of which texture fetched, block ranges computed, uploaded", res["load"])
+    for size, target in ((256, 200), (512, 600)):
+        row(f"page frame {size}² shaded, camera turning (drag)", res[f"page {size} shaded"], target)
+        row(f"page frame {size}² unshaded", res[f"page {size} unshaded"])
+        row(
+            f"page frame {size}² after a hand edit (LUT + blocks + frame)", res[f"page edit {size}"]
+        )
+    sides = sorted({d["width"] for d in res["drag frames"]})
+    row(f"page drag frames of a real mouse drag (sides {sides})",
+        [d["ms"] for d in res["drag frames"]], 200)  # fmt: skip
+    row("click → outline (page clock), attribution ready", res["click"], 300)
+    row("  the attribution pass, run once the view rests", res["attribution"])
+    row("server still 256² shaded (render_ms)", res["server 256"])
+    row("server still 512² shaded (render_ms)", res["server 512"], 500)
+    print()
+    if res["drag note"]:
+        print(f"on screen while dragging: {res['drag note']!r}")
+    print(f"pick: {res['pick info']!r}")
+    if "samples 256" in res:
+        print()
+        print("shader cost per sample (every sample visible, no early end):")
+        for size in (256, 512):
+            n = res[f"samples {size}"]
+            for shading in ("shaded", "unshaded"):
+                ms = res[f"dense {size} {shading}"]
+                print(f"  {size}² {shading}: {n / 1e6:.1f} M samples in {ms:.0f} ms = "
+                      f"{ms * 1e6 / n:.1f} ns a sample ({n / ms / 1e3:.0f} M samples/s)")  # fmt: skip
 
 
 if __name__ == "__main__":

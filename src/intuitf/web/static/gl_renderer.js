@@ -8,7 +8,7 @@
 // diffuse 0.7, specular 0.25, shininess 24, early stop at T < 1/255.
 
 import { extentOf, frame } from "./gl_camera.js";
-import { ATTRIBUTE, RENDER, VERTEX } from "./gl_shaders.js";
+import { RENDER, VERTEX, attributeSource } from "./gl_shaders.js";
 import { occupancy, tfKey, tfLut } from "./gl_tf.js";
 import { visibleBlocks } from "./gl_volume.js";
 
@@ -85,7 +85,7 @@ export class GLVolumeRenderer {
     this.maxTexture = gl.getParameter(gl.MAX_TEXTURE_SIZE);
     this.render = this.render.bind(this);
     this.progRender = program(gl, VERTEX, RENDER);
-    this.progAttr = null; // compiled on the first pick
+    this.progAttr = {}; // per number of targets, compiled on the first pick that needs it
     this.vao = gl.createVertexArray();
     this.volume = null;
     this.lutTex = gl.createTexture();
@@ -294,30 +294,37 @@ export class GLVolumeRenderer {
   attribution({ tf, camera, width, height, sampleDistance = DEFAULTS.sampleDistance }) {
     const gl = this.gl;
     if (!this.floatTargets) return null;
-    if (!this.progAttr) this.progAttr = program(gl, VERTEX, ATTRIBUTE);
     const ng = Math.min(16, tf.gaussians.length);
-    this._useTF(tf, sampleDistance);
-    const prog = this.progAttr;
-    const g = new Float32Array(64);
-    tf.gaussians.slice(0, 16).forEach((x, i) => g.set([x.mean, x.width, x.height, 0], i * 4));
     const targets = Math.ceil(ng / 4);
+    if (!this.progAttr[targets]) this.progAttr[targets] = program(gl, VERTEX, attributeSource(targets));
+    this._useTF(tf, sampleDistance);
+    const prog = this.progAttr[targets];
+    const gMean = new Float32Array(16);
+    const gWidth = new Float32Array(16).fill(1);
+    const gHeight = new Float32Array(16);
+    tf.gaussians.slice(0, 16).forEach((x, i) => {
+      gMean[i] = x.mean;
+      gWidth[i] = x.width;
+      gHeight[i] = x.height;
+    });
     const fb = gl.createFramebuffer();
     gl.bindFramebuffer(gl.FRAMEBUFFER, fb);
     gl.activeTexture(gl.TEXTURE3);
     const texs = [];
-    for (let i = 0; i < 4; i++) {
+    for (let i = 0; i < targets; i++) {
       const t = gl.createTexture();
       gl.bindTexture(gl.TEXTURE_2D, t);
       gl.texStorage2D(gl.TEXTURE_2D, 1, gl.RGBA32F, width, height);
       gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0 + i, gl.TEXTURE_2D, t, 0);
       texs.push(t);
     }
-    gl.drawBuffers([0, 1, 2, 3].map((i) => gl.COLOR_ATTACHMENT0 + i));
+    gl.drawBuffers(texs.map((_, i) => gl.COLOR_ATTACHMENT0 + i));
     // After the targets are made: _common binds the LUT to texture unit 2, which making a
     // target (bindTexture on the active unit) would replace.
     this._common(prog, { camera, width, height, sampleDistance });
-    gl.uniform4fv(prog.u.u_gauss, g);
-    gl.uniform1i(prog.u.u_ng, ng);
+    gl.uniform4fv(prog.u.u_mean, gMean);
+    gl.uniform4fv(prog.u.u_width, gWidth);
+    gl.uniform4fv(prog.u.u_height, gHeight);
     gl.viewport(0, 0, width, height);
     gl.drawArrays(gl.TRIANGLES, 0, 3);
     const out = new Float32Array(ng * width * height);

@@ -169,16 +169,20 @@ void main() {
   outColor = u_alphaOut == 1 ? vec4(acc, 1.0 - tr) : vec4(acc + tr * u_bg, 1.0);
 }`;
 
-/** Per-feature attribution (kernels.attribute over the sample cache's nearest-entry samples):
- * each Gaussian's part of the pixel's accumulated opacity, 16 Gaussians in four RGBA targets. */
-export const ATTRIBUTE = `#version 300 es
+/**
+ * Per-feature attribution (kernels.attribute over the sample cache's nearest-entry samples):
+ * each Gaussian's part of the pixel's accumulated opacity, four Gaussians per RGBA target.
+ * `groups` (1–4) is how many targets: the source is made for it, with the Gaussians in vec4s
+ * (no arrays indexed at run time, which software rasterisers keep in memory).
+ */
+export function attributeSource(groups) {
+  const g = [0, 1, 2, 3].slice(0, groups);
+  return `#version 300 es
 ${COMMON}
-uniform vec4 u_gauss[16];  // mean, width, height, unused
-uniform int u_ng;
-layout(location = 0) out vec4 out0;
-layout(location = 1) out vec4 out1;
-layout(location = 2) out vec4 out2;
-layout(location = 3) out vec4 out3;
+uniform vec4 u_mean[4];
+uniform vec4 u_width[4];   // unused slots: width 1, height 0
+uniform vec4 u_height[4];
+${g.map((i) => `layout(location = ${i}) out vec4 out${i};`).join("\n")}
 
 void main() {
   vec3 o, d;
@@ -188,8 +192,7 @@ void main() {
   vec2 t = slab(oi.x, di.x, u_dims.x - 1.0, vec2(0.0, 1e30));
   t = slab(oi.y, di.y, u_dims.y - 1.0, t);
   t = slab(oi.z, di.z, u_dims.z - 1.0, t);
-  float parts[16];
-  for (int c = 0; c < 16; c++) parts[c] = 0.0;
+${g.map((i) => `  vec4 part${i} = vec4(0.0);`).join("\n")}
   float tr = 1.0;
   float scale = float(u_nl - 1);
   if (t.y >= t.x) {
@@ -213,19 +216,12 @@ void main() {
       float a = lutAt(q).a;
       if (a > 0.0) {
         float s = float(q) / scale;
-        float comps[16];
-        float total = 0.0;
-        for (int c = 0; c < 16; c++) {
-          comps[c] = 0.0;
-          if (c < u_ng) {
-            float z = (s - u_gauss[c].x) / u_gauss[c].y;
-            comps[c] = u_gauss[c].z * exp(-0.5 * z * z);
-            total += comps[c];
-          }
-        }
-        float w = tr * a;
+${g.map((i) => `        vec4 z${i} = (vec4(s) - u_mean[${i}]) / u_width[${i}];
+        vec4 c${i} = u_height[${i}] * exp(-0.5 * z${i} * z${i});`).join("\n")}
+        float total = ${g.map((i) => `dot(c${i}, vec4(1.0))`).join(" + ")};
         if (total > 0.0) {
-          for (int c = 0; c < 16; c++) parts[c] += w * comps[c] / total;
+          float w = tr * a / total;
+${g.map((i) => `          part${i} += w * c${i};`).join("\n")}
         }
         tr *= 1.0 - a;
         if (tr < u_tstop) break;
@@ -233,8 +229,6 @@ void main() {
       k += 1;
     }
   }
-  out0 = vec4(parts[0], parts[1], parts[2], parts[3]);
-  out1 = vec4(parts[4], parts[5], parts[6], parts[7]);
-  out2 = vec4(parts[8], parts[9], parts[10], parts[11]);
-  out3 = vec4(parts[12], parts[13], parts[14], parts[15]);
+${g.map((i) => `  out${i} = part${i};`).join("\n")}
 }`;
+}

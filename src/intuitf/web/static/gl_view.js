@@ -142,6 +142,17 @@ function attribution(tf, camera, size) {
   return attrCache.attr;
 }
 
+/**
+ * Compute the attribution for a view ahead of a click (after the view settles), so a click
+ * finds it ready: the outline then follows within the frame.
+ */
+export function prepare(tf, camera, size) {
+  if (!canPick()) return;
+  const t0 = performance.now();
+  attribution(tf, camera, size);
+  stats.prepared = { ms: Math.round(performance.now() - t0), size };
+}
+
 /** The pick can run here (float render targets): otherwise the server picks. */
 export function canPick() {
   return !!R && R.floatTargets;

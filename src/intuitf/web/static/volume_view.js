@@ -99,6 +99,10 @@ export function initVolumeView() {
     frame(state.draftDragging ? "drag" : "full"),
   );
   on("camera", () => frame("full"));
+  // A chosen volume starts loading into the page at once, beside its histogram.
+  on("volumeId", () => {
+    if (!state.run && state.volumeId) glv.ensureVolume(state.volumeId);
+  });
   on(["pick", "selected", "camera"], drawOverlay);
   on(["current", "draft", "run", "volumeId", "histogram"], updateTitle);
   on("runDetail", () => {
@@ -246,8 +250,17 @@ function drawPageFrame() {
   if (quality === "full") {
     set({ viewSettled: { camera, size: viewSize, shaded: state.shaded, key: JSON.stringify(t0key(gt)), n: frameCount } });
     if (state.selected.size) drawOverlay();
+    // Once the view rests, the attribution pass for a click (a pick then costs no pass).
+    clearTimeout(prepareTimer);
+    prepareTimer = setTimeout(() => {
+      const now = pageTarget(target());
+      const pickable = (splitQid(state.current) || (!state.run && now && target().volume)) && !state.draft;
+      if (glPending === null && !drag && now && pickable && glv.ready(now.volume)) glv.prepare(now.tf, cameraJSON(), viewSize);
+    }, 200);
   }
 }
+
+let prepareTimer = null;
 
 function t0key(gt) {
   return [gt.volume, gt.tf && gt.tf.gaussians].map((x) => JSON.stringify(x)).join("|").slice(0, 200);
