@@ -33,6 +33,7 @@ import json
 import logging
 import os
 import signal
+import socket
 import threading
 import time
 import traceback
@@ -42,6 +43,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from intuitf.batch.lease import DriverLease, LeasedJudge, LeaseWatch, start_reaper
 from intuitf.batch.plan import VolumeItem
 from intuitf.errors import IntuitfError, RenderError, TransferFunctionError, VolumeError
 
@@ -77,6 +79,8 @@ class BatchConfig:
     #: Judge requests per second per worker (None: no limit).
     rate_per_s: float | None = None
     numba_threads: int | None = None
+    #: "host:port" of the driver's lease (Ray: workers may outlive the driver); None: none.
+    lease: str | None = None
 
     @property
     def uses_model(self) -> bool:
@@ -237,6 +241,17 @@ class WorkerCore:
         )
         self.active: dict[str, Any] = {}
         self.stopping = False
+        self.watch = LeaseWatch(config.lease) if config.lease else None
+        self._watching: asyncio.Task | None = None
+
+    async def _watch_driver(self) -> None:
+        """Stop every run as soon as the driver's lease ends (it was killed)."""
+        if self.watch is None:
+            return
+        await self.watch.wait_gone()
+        if not self.stopping:
+            log.warning("The batch driver is gone: stopping this worker's runs.")
+            self.stop()
 
     def stop(self) -> None:
         """Cancel every run between two matches (each is resumed later, nothing repeated)."""
@@ -250,6 +265,8 @@ class WorkerCore:
     async def run(self, item: VolumeItem) -> dict:
         """Run (or resume, or skip) one volume; never raises: the result says what happened."""
         t0 = time.perf_counter()
+        if self.watch is not None and self._watching is None:
+            self._watching = asyncio.get_running_loop().create_task(self._watch_driver())
         prev = read_result(self.root, item.key) or {}
         # What an earlier pass recorded stands until this one has better figures: a volume
         # that stops at once (the budget spent before its turn) keeps its calls, generations
@@ -309,6 +326,8 @@ class WorkerCore:
             if self.limiter is not None:
                 limiter = self.limiter
                 session.add_judge_middleware(lambda judge: ThrottledJudge(judge, limiter))
+            if self.watch is not None:  # checked before each comparison
+                session.judge = LeasedJudge(session.judge, self.watch, self.stop)
             timing = _Timing(session)
             if self.stopping:
                 session.cancel()
@@ -699,11 +718,14 @@ def drive(
     if not pending:
         return results
     started_ray = False
+    reaper = None
     if use_ray:
         ray = import_ray()
         if not ray.is_initialized():
             _ray_init(ray, ray_address, ray_timeout)
             started_ray = True
+            if ray_address in (None, "", "local"):
+                reaper = start_reaper(ray)  # it goes away with this process, killed or not
         n_workers = int(workers or max(1, int(ray.cluster_resources().get("CPU", 1.0))))
     else:
         n_workers = max(1, min(workers or (os.cpu_count() or 1), len(pending)))
@@ -713,10 +735,21 @@ def drive(
         config.max_in_flight = max(1, int(max_concurrency) // n_workers)
     if rate_per_min:
         config.rate_per_s = float(rate_per_min) / 60.0 / n_workers
-    if use_ray:
-        backend: Any = RayBackend(config, n_workers, ray_address, started_here=started_ray)
-    else:
-        backend = PoolBackend(config, n_workers)
+    lease = None
+    if use_ray:  # workers that may outlive this process stop when it is gone
+        lease = DriverLease(_node_ip(ray_address))
+        config.lease = lease.address
+    try:
+        if use_ray:
+            backend: Any = RayBackend(config, n_workers, ray_address, started_here=started_ray)
+        else:
+            backend = PoolBackend(config, n_workers)
+    except BaseException:
+        if lease is not None:
+            lease.close()
+        if reaper is not None:
+            reaper.close()
+        raise
     load = [0] * backend.workers
     running: dict[str, tuple[int, VolumeItem]] = {}
     stopping = False
@@ -823,7 +856,24 @@ def drive(
                 pending.clear()
     finally:
         backend.shutdown()
+        if lease is not None:
+            lease.close()
+        if reaper is not None:
+            reaper.close()
     return results
+
+
+def _node_ip(address: str | None) -> str:
+    """The address workers reach this process at: loopback for a local Ray, else this node's
+    address as Ray sees it."""
+    if address in (None, "", "local"):
+        return "127.0.0.1"
+    try:
+        import ray
+
+        return str(ray.util.get_node_ip_address())
+    except Exception:  # noqa: BLE001
+        return socket.gethostbyname(socket.gethostname())
 
 
 def _ray_init(ray, address: str | None, timeout: float = DEFAULT_RAY_TIMEOUT) -> None:
@@ -850,12 +900,16 @@ def _ray_init(ray, address: str | None, timeout: float = DEFAULT_RAY_TIMEOUT) ->
         except BaseException as exc:  # noqa: BLE001 - handed to the calling thread
             box["error"] = exc
 
-    # ray.init has no timeout of its own: a head that never answers would hold us forever.
-    t = threading.Thread(target=init, daemon=True, name="ray-init")
-    t.start()
-    t.join(timeout)
     where = address if not local else "a local instance"
-    if t.is_alive():
+    if local:  # starting one here: Ray's own start-up checks apply (and want the main thread)
+        init()
+        t = None
+    else:
+        # ray.init has no timeout of its own: a head that never answers would hold us forever.
+        t = threading.Thread(target=init, daemon=True, name="ray-init")
+        t.start()
+        t.join(timeout)
+    if t is not None and t.is_alive():
         raise IntuitfError(
             f"Ray at {where} did not answer within {timeout:g} s.",
             "Check the address (`ray status` on the head node shows it) and that this machine "
