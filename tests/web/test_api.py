@@ -60,7 +60,7 @@ def test_info_and_volumes(client):
     vols = client.get("/api/volumes").json()
     ph = next(v for v in vols if v["id"] == "phantom")
     assert ph == {"id": "phantom", "name": "phantom", "shape": [96, 96, 96], "dtype": "uint8",
-                  "source": "builtin"}  # fmt: skip
+                  "source": "builtin", "spacing": None}  # fmt: skip
     h = client.get("/api/volumes/phantom/histogram").json()
     assert len(h["counts"]) == 256 and max(h["counts"]) == pytest.approx(1.0)
     assert h["value_range"][0] < h["value_range"][1]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 import socket
 from pathlib import Path
@@ -11,6 +12,7 @@ import typer
 from rich.console import Console
 
 from intuitf.cli import judge_options as jo
+from intuitf.cli import options as vo
 from intuitf.errors import IntuitfError
 
 console = Console()
@@ -33,6 +35,24 @@ def allowed_hosts(host: str, port: int) -> list[str]:
     if host in ("0.0.0.0", "::"):
         out.append(f"{socket.gethostname()}:{port}")
     return out
+
+
+def check_port(host: str, port: int) -> None:
+    """A plain error when ``port`` is taken (another server listens there)."""
+    bind = host if host not in ("0.0.0.0", "::", "localhost") else "127.0.0.1"
+    family = socket.AF_INET6 if ":" in bind else socket.AF_INET
+    with socket.socket(family) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind((bind, port))
+        except OSError as exc:
+            if exc.errno == errno.EADDRINUSE:
+                raise IntuitfError(
+                    f"Port {port} is taken: another program (perhaps another intuitf serve) "
+                    "listens there.",
+                    "Stop it, give another --port, or leave --port out for a free one.",
+                ) from None
+            raise IntuitfError(f"Cannot listen on {host}:{port}: {exc.strerror or exc}.") from None
 
 
 def register(app: typer.Typer) -> None:
@@ -89,6 +109,16 @@ def register(app: typer.Typer) -> None:
                 "usable). New runs take it; a run's views render on the run's device.",
             ),  # fmt: skip
         ] = "auto",
+        spacing: vo.SpacingOpt = None,
+        token: Annotated[
+            str | None,
+            typer.Option(
+                "--token",
+                envvar="INTUITF_TOKEN",
+                help="Access token (default: the one kept in the runs folder, made on the first "
+                "serve, so open pages survive a restart).",
+            ),  # fmt: skip
+        ] = None,
         max_concurrency: jo.MaxConcurrencyOpt = None,
         max_output_tokens: jo.MaxOutputTokensOpt = None,
         reasoning_effort: jo.ReasoningEffortOpt = None,
@@ -97,7 +127,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Start the web app: watch runs, steer them, and pick, refine and export results."""
         from intuitf.web.app import create_app, make_server
-        from intuitf.web.security import new_token
+        from intuitf.web.security import kept_token
 
         if data is None and os.environ.get("INTUITF_DATA"):
             data = Path(os.environ["INTUITF_DATA"])
@@ -115,13 +145,17 @@ def register(app: typer.Typer) -> None:
             port = port or free_port(host if host not in ("0.0.0.0", "::") else "127.0.0.1")
         except OSError as exc:
             raise IntuitfError(f"Cannot bind to {host}: {exc.strerror or exc}.") from None
+        check_port(host, port)  # before the address is printed: a taken port is said plainly
+        reader = vo.volume_kwargs(spacing=spacing)
         from intuitf.render.device import select_device
 
         select_device(device)  # a missing GPU is reported before the server starts
         judge_options = jo.judge_options(
             max_concurrency, max_output_tokens, reasoning_effort, price, unpriced
         )
-        token = new_token()
+        if token is not None and len(token) < 16:
+            raise IntuitfError("--token must be at least 16 characters.", "Use a long random one.")
+        token = token or kept_token(Path(runs))
         app = create_app(
             runs,
             list(volumes or []),
@@ -131,6 +165,7 @@ def register(app: typer.Typer) -> None:
             allowed_hosts=allowed_hosts(host, port),
             max_upload_bytes=max_upload_mb * 1024 * 1024,
             max_dim=max_dim,
+            spacing=reader.get("spacing"),
             device=None if device == "auto" else device,
             judge_options=judge_options,
         )

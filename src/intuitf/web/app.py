@@ -264,6 +264,7 @@ def create_app(
     max_upload_bytes: int = DEFAULT_MAX_UPLOAD,
     *,
     max_dim: int | None = None,
+    spacing: tuple[float, float, float] | None = None,
     default_settings: dict | None = None,
     sse_keepalive: float = 15.0,
     max_live_runs: int = 4,
@@ -294,7 +295,11 @@ def create_app(
     runs_path.mkdir(parents=True, exist_ok=True)
     token = token or new_token()
     catalog = VolumeCatalog(
-        list(volumes), data_dir, upload_dir=runs_path / UPLOADS / "volumes", max_dim=max_dim
+        list(volumes),
+        data_dir,
+        upload_dir=runs_path / UPLOADS / "volumes",
+        max_dim=max_dim,
+        spacing=spacing,
     )
     web = WebState(
         runs_path,

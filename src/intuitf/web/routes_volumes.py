@@ -7,7 +7,7 @@ from typing import Any
 
 from fastapi import APIRouter, File, Request, UploadFile
 from fastapi.responses import Response
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field
 
 from intuitf.session.scheduler import INTERACTIVE, render_scheduler
 from intuitf.web.common import (
@@ -41,6 +41,16 @@ class VolumeOut(BaseModel):
     shape: list[int] | None = Field(None, description="[x, y, z]; null until first loaded")
     dtype: str | None = None
     source: str
+    spacing: list[float] | None = Field(
+        None, description="voxel size [x, y, z] set by serve --spacing or PATCH; null: the file's"
+    )
+
+
+class VolumePatch(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    spacing: list[float] | None = Field(
+        ..., min_length=3, max_length=3, description="[x, y, z]; null: the file's own"
+    )
 
 
 class Material(BaseModel):
@@ -95,6 +105,12 @@ async def upload_volume(request: Request, file: UploadFile = File(...)) -> dict:
     data = await read_limited(file, web.max_upload_bytes)
     entry = await asyncio.to_thread(web.catalog.save_upload, file.filename or "", data)
     return entry.to_dict()
+
+
+@router.patch("/volumes/{volume_id}", response_model=VolumeOut)
+def set_volume(request: Request, volume_id: str, body: VolumePatch) -> dict:
+    """Set a file volume's voxel size (a raw file has none of its own): new runs use it."""
+    return state(request).catalog.set_spacing(volume_id, body.spacing).to_dict()
 
 
 @router.delete("/volumes/{volume_id}", status_code=204, response_class=Response)

@@ -361,3 +361,26 @@ def _cookie(header: str, name: str) -> str | None:
 def new_token() -> str:
     """A fresh per-launch token."""
     return secrets.token_urlsafe(24)
+
+
+TOKEN_FILE = ".token"
+
+
+def kept_token(runs_dir) -> str:
+    """The token kept in the runs folder (made on first use, readable by its owner only), so
+    that a restarted server takes the pages still open on it."""
+    from pathlib import Path
+
+    path = Path(runs_dir).expanduser() / TOKEN_FILE
+    try:
+        token = path.read_text(encoding="utf-8").strip()
+        if len(token) >= 16:
+            return token
+    except OSError:
+        pass
+    token = new_token()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w", encoding="utf-8") as f:
+        f.write(token + "\n")
+    return token

@@ -52,6 +52,7 @@ class VolumeEntry:
             "shape": self.shape,
             "dtype": self.dtype,
             "source": self.kind,
+            "spacing": list(self.options["spacing"]) if self.options.get("spacing") else None,
         }
 
     def spec(self):
@@ -91,10 +92,13 @@ class VolumeCatalog:
         data_dir: str | os.PathLike | None = None,
         upload_dir: str | os.PathLike | None = None,
         max_dim: int | None = None,
+        spacing: tuple[float, float, float] | None = None,
     ) -> None:
         self.data_dir = Path(data_dir) if data_dir else None
         self.upload_dir = Path(upload_dir) if upload_dir else None
         self.max_dim = max_dim
+        #: Voxel size given on the command line (serve --spacing): every file volume's.
+        self.spacing = tuple(float(v) for v in spacing) if spacing else None
         self._lock = threading.RLock()
         self._entries: dict[str, VolumeEntry] = {}
         self._loaded: OrderedDict[str, Any] = OrderedDict()
@@ -113,7 +117,31 @@ class VolumeCatalog:
 
     # -- the list -------------------------------------------------------------------------
     def _options(self) -> dict[str, Any]:
-        return {"max_dim": self.max_dim} if self.max_dim else {}
+        out: dict[str, Any] = {"max_dim": self.max_dim} if self.max_dim else {}
+        if self.spacing:
+            out["spacing"] = list(self.spacing)
+        return out
+
+    def set_spacing(self, volume_id: str, spacing: list[float] | None) -> VolumeEntry:
+        """Give a file volume its voxel size (x, y, z), or None for the file's own; new runs
+        and views of it use that (runs made before keep the spacing they recorded)."""
+        entry = self.get(volume_id)
+        if entry.kind == "builtin":
+            raise ApiError(409, "The built-in phantom's voxels are cubes; its spacing is fixed.")
+        if spacing is not None:
+            if len(spacing) != 3 or not all(0 < float(v) < 1e6 for v in spacing):
+                raise ApiError(
+                    422, "A spacing is three positive numbers [x, y, z].", "E.g. [1, 1, 2.5]."
+                )
+            spacing = [float(v) for v in spacing]
+        with self._lock:
+            if spacing is None:
+                entry.options.pop("spacing", None)
+            else:
+                entry.options["spacing"] = spacing
+            self._loaded.pop(entry.id, None)
+            self._histograms.pop(entry.id, None)
+        return entry
 
     def _add(self, entry: VolumeEntry) -> VolumeEntry:
         base, k = entry.id, 1

@@ -115,6 +115,47 @@ function initTopbar() {
     const id = d.volume_id || (state.volumes.find((v) => v.id === d.info.volume || v.name === d.info.volume) || {}).id;
     if (id && id !== state.volumeId && state.volumes.some((v) => v.id === id)) set({ volumeId: id });
   });
+  // A file volume's voxel size (a raw file has none), and deleting an upload.
+  const spacingField = document.getElementById("volume-spacing-field");
+  const spacing = document.getElementById("volume-spacing");
+  const del = document.getElementById("volume-delete");
+  const syncVolumeTools = () => {
+    const v = state.volumes.find((x) => x.id === state.volumeId);
+    const previewing = v && !state.run;
+    spacingField.hidden = !previewing || v.source === "builtin";
+    if (previewing && document.activeElement !== spacing) spacing.value = v.spacing ? v.spacing.join(",") : "";
+    del.hidden = !previewing || v.source !== "upload";
+  };
+  on(["volumes", "volumeId", "run"], syncVolumeTools);
+  spacing.addEventListener("change", async () => {
+    const id = state.volumeId;
+    const text = spacing.value.trim();
+    const vals = text ? text.split(/[ ,x×]+/).map(Number) : null;
+    if (vals && (vals.length !== 3 || !vals.every((x) => Number.isFinite(x) && x > 0))) {
+      showMessage("A spacing is three positive numbers, e.g. 1,1,2.5.", { kind: "warn" });
+      return;
+    }
+    try {
+      const v = await api.request("PATCH", `/api/volumes/${api.enc(id)}`, { spacing: vals });
+      set({ volumes: state.volumes.map((x) => (x.id === v.id ? v : x)), volumeId: v.id });
+      showMessage(vals ? `${v.name}: voxels ${vals.join(" × ")}; new runs of it use this spacing.` : `${v.name}: the file's own spacing.`, { kind: "ok" });
+    } catch (err) {
+      showError(err);
+    }
+  });
+  del.addEventListener("click", async () => {
+    const id = state.volumeId;
+    if (!id || !window.confirm(`Delete the uploaded volume ${id}? Its file is removed.`)) return;
+    try {
+      await api.request("DELETE", `/api/volumes/${api.enc(id)}`, undefined, { raw: true });
+      const volumes = state.volumes.filter((x) => x.id !== id);
+      set({ volumes });
+      previewVolume((volumes.find((v) => v.id === "phantom") || volumes[0] || {}).id || null);
+      showMessage(`Deleted ${id}.`, { kind: "ok" });
+    } catch (err) {
+      showError(err);
+    }
+  });
   const file = document.getElementById("volume-upload");
   file.addEventListener("change", async () => {
     const f = file.files[0];
