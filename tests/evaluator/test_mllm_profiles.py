@@ -277,6 +277,7 @@ def test_low_rpm_server_is_waited_out_by_its_retry_delay(oracle_images):
                          "and billing details.", "type": "insufficient_quota",
                          "code": "insufficient_quota"}}),
         (402, {"error": {"message": "Insufficient credits", "code": 402}}),
+        (429, {"error": {"message": "Error code insufficient_quota: add credit."}}),
     ],
 )  # fmt: skip
 def test_no_credit_stops_with_a_billing_message(status, body):

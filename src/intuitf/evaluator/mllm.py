@@ -1,15 +1,25 @@
 """MLLMJudge: a multimodal model compares two renderings over the OpenAI chat-completions protocol.
 
 One ``AsyncOpenAI`` client per judge (per event loop) reaches OpenAI, Gemini, Ollama, vLLM, LM
-Studio, OpenRouter or any compatible server. The SDK's own retries are off; this module retries
-with exponential backoff and jitter, honouring ``Retry-After``.
+Studio, OpenRouter or any compatible server. What a request carries follows the provider's and
+the model family's profile (:mod:`intuitf.evaluator.profiles`: token-limit parameter,
+temperature, reasoning effort, structured-output mode, images per request). A 400 that names
+one of these is fixed once (renamed or dropped parameter, JSON schema → JSON object → plain
+text, fewer images) and listed in :attr:`MLLMJudge.adaptations`; any other 400 is an error of
+that request. The SDK's own retries are off; this module retries with exponential backoff and
+jitter, waiting as long as the server asks (``Retry-After``, ``retry-after-ms``,
+``x-ratelimit-reset-*``, Gemini's ``retryDelay``), and keeps as many requests in flight as the
+server bears (:class:`~intuitf.evaluator.concurrency.AdaptiveLimit`). HTTP 402 and
+``insufficient_quota`` raise :class:`~intuitf.errors.BudgetExhausted` with a billing message.
 
 **Unusable answers are asked again.** An answer with no readable choice (unparseable or cut
 off) is followed up with a corrective message ("answer only with the JSON object ..."), a
 refusal with a short explanation of the task (once: a second refusal is final), and a "blind"
-answer (the model says it cannot see the images) by sending the question again; at most
-``answer_retries`` times per answer (by default the retry budget, ``max_retries``). Only when every try was unusable does the comparison become
-a *logged tie* (``Verdict.error`` set, the verdict *undecided*, not cached). ``Verdict.retries``
+answer (the model says it cannot see the images) by sending the question again, and an empty
+answer cut off by the output budget (a reasoning model's thoughts spent it) with twice the
+budget; an empty assistant turn is never sent. At most ``answer_retries`` times per answer (by
+default the retry budget, ``max_retries``). Only when every try was unusable does the comparison
+become a *logged tie* (``Verdict.error`` set, the verdict *undecided*, not cached). ``Verdict.retries``
 says how many re-asks a verdict took.
 
 **Failure rule.** It raises :class:`~intuitf.errors.JudgeError` when the server gives no answer
@@ -511,7 +521,9 @@ class MLLMJudge:
         if self._dearest_usd > 0:
             return self._dearest_usd
         tokens_in = len(prompt) // 4 + n_images * _IMAGE_TOKENS_GUESS
-        return self.prices.cost(self.model, tokens_in, 300)
+        # A reasoning model's thoughts are billed as output too.
+        tokens_out = 300 + (self.profile.output_tokens // 4 if self.profile.thinking else 0)
+        return self.prices.cost(self.model, tokens_in, tokens_out)
 
     def _no_answer(self, message: str) -> JudgeError:
         return JudgeError(
@@ -581,7 +593,7 @@ class MLLMJudge:
                 cost.seconds += time.perf_counter() - t0
                 status = exc.status_code
                 param, code, message = _error_fields(exc)
-                if status == 402 or "insufficient_quota" in (code, message):
+                if status == 402 or "insufficient_quota" in (code + " " + message):
                     self.cost += cost
                     raise self._billing(status, code, message) from None
                 if status in (400, 404, 415, 422) and self._adapt(
