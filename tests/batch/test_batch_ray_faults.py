@@ -101,3 +101,66 @@ def test_a_resume_runs_on_ray_again_and_says_so(batch_inputs, tmp_path):
     assert again.returncode == 0, again.stdout + again.stderr
     assert "on Ray (local) as the batch was started" in out
     assert json.loads((root / "summary.json").read_text())["backend"] == "ray"
+
+
+def _kill_tree_with(marker: str) -> None:
+    """End the processes whose command line holds ``marker`` (and only those)."""
+    pids = []
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit() and int(d.name) != os.getpid():
+            try:
+                if marker in (d / "cmdline").read_bytes().decode(errors="replace"):
+                    pids.append(int(d.name))
+            except OSError:
+                continue
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        for p in pids:
+            try:
+                os.kill(p, sig)
+            except OSError:
+                pass
+        time.sleep(1.0)
+
+
+@pytest.fixture
+def ray_head(tmp_path_factory):
+    """A head started the documented way (``ray start --head --port N``), ended afterwards."""
+    pytest.importorskip("ray")
+    import socket
+    import tempfile
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    temp = tempfile.mkdtemp(prefix="rh", dir="/tmp")  # Ray wants a short path
+    started = subprocess.run(
+        ["ray", "start", "--head", "--port", str(port), "--num-cpus", "1",
+         "--include-dashboard=false", "--disable-usage-stats", f"--temp-dir={temp}"],
+        capture_output=True, text=True, timeout=180,
+    )  # fmt: skip
+    try:
+        assert started.returncode == 0, started.stdout + started.stderr
+        yield port
+    finally:
+        _kill_tree_with(temp)
+
+
+def test_joining_a_head_started_with_ray_start_by_its_address(batch_inputs, ray_head, tmp_path):
+    vol = str(next(batch_inputs["vols"].glob("*32*.npy")))
+    base = [sys.executable, "-m", "intuitf", "batch", str(batch_inputs["picture"]), vol,
+            "--max-dim", "32", "--population", "6", "--generations", "1", "--size", "32",
+            "--output-size", "48", "--top", "1"]  # fmt: skip
+    joined = subprocess.run([*base, "-o", str(tmp_path / "a"), "--ray", f"127.0.0.1:{ray_head}"],
+                            capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert joined.returncode == 0, joined.stdout + joined.stderr
+    assert json.loads((tmp_path / "a" / "summary.json").read_text())["backend"] == "ray"
+
+    # A wrong token is reported as a refusal, at once, not as a hang or "cannot connect".
+    env = dict(os.environ, RAY_AUTH_MODE="token", RAY_AUTH_TOKEN="0" * 32)
+    t0 = time.monotonic()
+    refused = subprocess.run([*base, "-o", str(tmp_path / "b"), "--ray", f"127.0.0.1:{ray_head}"],
+                             capture_output=True, text=True, timeout=120, env=env)  # fmt: skip
+    out = " ".join((refused.stdout + refused.stderr).split())
+    assert refused.returncode == 2, out
+    assert "refused this process's authentication token" in out and "RAY_AUTH_TOKEN" in out
+    assert time.monotonic() - t0 < 25  # well before the 30 s --ray-timeout

@@ -29,11 +29,13 @@ repeated); a killed batch takes its worker processes with it and resumes the sam
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import logging
 import os
 import signal
 import socket
+import sys
 import threading
 import time
 import traceback
@@ -905,10 +907,20 @@ def _ray_init(ray, address: str | None, timeout: float = DEFAULT_RAY_TIMEOUT) ->
         init()
         t = None
     else:
-        # ray.init has no timeout of its own: a head that never answers would hold us forever.
+        # ray.init has no timeout of its own: a head that never answers would hold us forever,
+        # and one that refuses the token is retried forever. Ray's own complaints (its C++
+        # core writes them to the process's stderr) are caught meanwhile, to say why.
         t = threading.Thread(target=init, daemon=True, name="ray-init")
-        t.start()
-        t.join(timeout)
+        with _captured_stderr() as said:
+            t.start()
+            end = time.monotonic() + timeout
+            while t.is_alive() and time.monotonic() < end:
+                t.join(0.25)
+                if _is_auth_refusal(said()):
+                    box["error"] = IntuitfError(said())
+                    break
+        if not t.is_alive() or box.get("error") is not None:
+            t = None
     if t is not None and t.is_alive():
         raise IntuitfError(
             f"Ray at {where} did not answer within {timeout:g} s.",
@@ -931,6 +943,29 @@ def _ray_init(ray, address: str | None, timeout: float = DEFAULT_RAY_TIMEOUT) ->
         "Check the address (`ray status` on the head node shows it), or drop ADDRESS to "
         "start a local instance.",
     ) from None
+
+
+@contextlib.contextmanager
+def _captured_stderr():
+    """Send the process's stderr (file descriptor 2) to a temporary file meanwhile; yields a
+    function returning what was written so far."""
+    import tempfile
+
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 2)
+
+        def said() -> str:
+            tmp.seek(0)
+            return tmp.read().decode("utf-8", "replace")
+
+        try:
+            yield said
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
 
 
 def _first_line(text: str, limit: int = 300) -> str:
