@@ -99,6 +99,11 @@ class Results:
             data["image"] = {"path": str(first.path), **enc.info(),
                              "full_size": [int(first.image.shape[1]), int(first.image.shape[0])]}  # fmt: skip
         text = self.scrub(json.dumps(data, default=_plain))
+        if 2 * len(text) > pics.RESULT_LIMIT - 64 * 1024:  # sent twice: text and structured
+            raise ToolError(
+                f"The answer would be {2 * len(text) // 1024} KiB, more than a client takes. "
+                "What to do: ask for less (a smaller limit, a later since, fewer candidates)."
+            )
         content: list[Any] = [TextContent(type="text", text=text)]
         content += [
             ImageContent(type="image", data=e.base64, mime_type=e.mime_type) for e in encoded
@@ -122,8 +127,10 @@ class Results:
             raise ToolError(self.scrub(_message(exc.detail, exc.hint))) from None
         except NotLive as exc:
             raise ToolError(f"The run {exc} is not going any more.") from None
-        except Exception as exc:  # a bug: say so briefly, keep serving, log it
-            log.exception("tool failed")
+        except Exception as exc:  # a bug: say so briefly, keep serving, log it (keys blanked)
+            import traceback
+
+            log.error("tool failed: %s", self.scrub(traceback.format_exc()))
             raise ToolError(
                 self.scrub(f"Internal error ({type(exc).__name__}): {str(exc)[:300]}")
             ) from None

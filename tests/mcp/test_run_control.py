@@ -1,0 +1,62 @@
+"""Run control through the tools: pause and continue a live run, a budget that stops a run and
+a continue that raises it (nothing paid for is asked again), cancel, and the server's default
+budget for model-judged runs."""
+
+from __future__ import annotations
+
+import asyncio
+
+import pytest
+from mcp_util import call, make_config, wait_run_end
+
+from mcp import Client
+
+pytestmark = pytest.mark.timeout(300)
+
+SETTINGS = {"population": 6, "generations": 2, "image_size": 32, "output_size": 32, "seed": 4}
+
+
+def test_pause_continue_budget_and_cancel(folders, fake_model):
+    from intuitf.mcp import build_server
+
+    # The server's default budget applies to model-judged runs that bring none of their own.
+    server, _ = build_server(make_config(folders, budget_calls=5))
+
+    async def main():
+        async with Client(server) as client:
+            vid = (await call(client, "open_volume", path="phantom", max_dim=32))["id"]
+            run = (await call(client, "start_run", volume=vid, intent="white bone",
+                              judge=fake_model.base_url, settings=SETTINGS))["run"]  # fmt: skip
+            paused = await call(client, "pause_run", run=run)
+            assert paused["paused"] is True
+            status = await call(client, "run_status", run=run)
+            assert any(e["type"] == "status" and e["data"]["status"] == "paused"
+                       for e in status["events"])  # fmt: skip
+            # Paused: no generation ends while we wait a little.
+            held = await call(client, "wait_for_generation", run=run, timeout_s=1.0)
+            assert held["outcome"] == "timeout" and held["live"]
+            going = await call(client, "continue_run", run=run)
+            assert going == {"run": run, "status": "running", "resumed": False}
+            stopped = await wait_run_end(client, run)
+            assert stopped["info"]["status"] == "budget"
+            calls = stopped["info"]["cost"]["calls"]
+            assert 0 < calls <= 5
+            asked = fake_model.stats.requests
+            more = await call(client, "continue_run", run=run, budget_calls=500)
+            assert more["resumed"] is True
+            done = await wait_run_end(client, run)
+            assert done["info"]["status"] == "completed" and done["info"]["generations_done"] == 2
+            # The verdicts already paid for were not asked again.
+            new_calls = done["info"]["cost"]["calls"] - calls
+            assert fake_model.stats.requests - asked == new_calls
+
+            other = (await call(client, "start_run", volume=vid, intent="white bone",
+                                judge="metric", settings={**SETTINGS, "generations": 50}))["run"]  # fmt: skip
+            await call(client, "wait_for_generation", run=other, timeout_s=60)
+            cancelled = await call(client, "cancel_run", run=other)
+            assert cancelled["status"] == "cancelling"
+            end = await wait_run_end(client, other)
+            assert end["info"]["status"] == "cancelled"
+            assert end["info"]["generations_done"] < 50
+
+    asyncio.run(main())
