@@ -43,10 +43,24 @@ SPECS = {
     "openai-reasoning": ["--evaluator", "openai:gpt-5.4-mini"],
     "openai-reasoning-by-url": ["--evaluator", "URL#gpt-5.4-mini"],
     "gemini-thinking": ["--evaluator", "gemini:gemini-2.5-flash"],
+    # Thoughts (2000 tokens at medium effort) spend a 1024-token budget: asked again with more.
+    "gemini-thinking-small-budget": [
+        "--evaluator",
+        "gemini:gemini-2.5-flash",
+        "--max-output-tokens",
+        "1024",
+        "--reasoning-effort",
+        "medium",
+    ],  # fmt: skip
     "ollama": ["--evaluator", "ollama"],
     "lmstudio": ["--evaluator", "lmstudio"],
     "vllm-one-image": ["--evaluator", "vllm"],
 }
+
+
+def _served(personality: str) -> str:
+    """The fake server's personality behind a variant of how it is reached."""
+    return personality.removesuffix("-by-url").removesuffix("-small-budget")
 
 
 def _target() -> np.ndarray:
@@ -58,9 +72,9 @@ def _target() -> np.ndarray:
 
 def short_run(personality: str, folder: Path) -> dict:
     """One short optimize against ``personality``: the figures of the issue's note."""
-    with FakeMLLMServer(target=_target(), personality=personality.removesuffix("-by-url")) as srv:
+    with FakeMLLMServer(target=_target(), personality=_served(personality)) as srv:
         spec = [s.replace("URL", srv.base_url) for s in SPECS[personality]]
-        if "URL" not in SPECS[personality][1]:
+        if not any("URL" in s for s in SPECS[personality]):
             spec += ["--base-url", srv.base_url]
         env = dict(os.environ, OPENAI_API_KEY="sk-fake", GEMINI_API_KEY="fake")
         run = folder / personality

@@ -29,10 +29,24 @@ SPECS = {
     "openai-reasoning": ["--evaluator", "openai:gpt-5.4-mini"],
     "openai-reasoning-by-url": ["--evaluator", "URL#gpt-5.4-mini"],
     "gemini-thinking": ["--evaluator", "gemini:gemini-2.5-flash"],
+    # Thoughts (2000 tokens at medium effort) spend a 1024-token budget: asked again with more.
+    "gemini-thinking-small-budget": [
+        "--evaluator",
+        "gemini:gemini-2.5-flash",
+        "--max-output-tokens",
+        "1024",
+        "--reasoning-effort",
+        "medium",
+    ],  # fmt: skip
     "ollama": ["--evaluator", "ollama"],
     "lmstudio": ["--evaluator", "lmstudio"],
     "vllm-one-image": ["--evaluator", "vllm"],
 }
+
+
+def _served(personality: str) -> str:
+    """The fake server's personality behind a variant of how it is reached."""
+    return personality.removesuffix("-by-url").removesuffix("-small-budget")
 
 
 def _target() -> np.ndarray:
@@ -65,10 +79,10 @@ def _shape(body: dict) -> dict:
 def _run(
     personality: str, run: Path, *extra: str
 ) -> tuple[subprocess.CompletedProcess, FakeMLLMServer, float]:
-    served = personality.removesuffix("-by-url")
+    served = _served(personality)
     with FakeMLLMServer(target=_target(), personality=served) as srv:
         spec = [s.replace("URL", srv.base_url) for s in SPECS[personality]]
-        if "URL" not in SPECS[personality][1]:
+        if not any("URL" in s for s in SPECS[personality]):
             spec += ["--base-url", srv.base_url]
         env = dict(
             os.environ, OPENAI_API_KEY="sk-fake", GEMINI_API_KEY="fake", PYTHONUNBUFFERED="1"
@@ -116,6 +130,9 @@ def test_short_optimize_completes_against_each_personality(personality, tmp_path
         assert [a["what"] for a in record["judge_adaptations"]] == ["images per request"]
     if personality == "openai-reasoning-by-url":
         assert [a["what"] for a in record["judge_adaptations"]] == ["max_tokens"]
+    if personality == "gemini-thinking-small-budget":
+        assert srv.stats.empty_answers > 0 and "empty parts" not in srv.stats.rejected
+        assert retried > 0  # matches whose first answer was empty were asked again
     if personality in ("ollama", "lmstudio"):
         assert srv.stats.max_in_flight <= 4  # a one-slot server is not flooded
     first = srv.requests_log[:3]
