@@ -92,15 +92,16 @@ def collect_run(run_dir: str | Path) -> RunContents:
             f"{root} is not a run folder (it does not exist or is not a directory).",
             "Give the folder that `intuitf optimize` wrote (the one holding run.json).",
         )
-    run = _read_json(root / "run.json")
+    rd = RunDirectory(root)
+    run = _read_json(rd.run_json)
     contents = RunContents(name=root.resolve().name, run=run if isinstance(run, dict) else {})
 
-    journal = RunDirectory(root).read_journal()
+    journal = rd.read_journal()
     contents.generations = latest_generations(journal)
     ends = [e for e in journal if e.get("type") == "end"]
     contents.end = ends[-1] if ends else None
 
-    summary = _read_json(root / "best" / "summary.json")
+    summary = _read_json(rd.best_summary)
     rating_of = {}
     if isinstance(summary, list):
         rating_of = {
@@ -115,12 +116,8 @@ def collect_run(run_dir: str | Path) -> RunContents:
             if key is not None and isinstance(c.get("rating"), int | float):
                 ratings_by_tf[key] = float(c["rating"])
 
-    best_dir = root / "best"
-    ranks = sorted(
-        {int(m.group(1)) for p in best_dir.glob("rank*") if (m := re.match(r"rank(\d+)\.", p.name))}
-    )
-    for rank in ranks:
-        stem = best_dir / f"rank{rank:02d}"
+    for rank in rd.best_ranks():
+        stem = rd.best_stem(rank)
         entry = BestEntry(rank=rank)
         entry.image = _read_bytes(stem.with_name(stem.name + ".png"))
         entry.plot = _read_bytes(stem.with_name(stem.name + ".tf.png"))

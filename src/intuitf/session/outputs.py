@@ -46,7 +46,7 @@ def write_run_outputs(session: Session) -> None:
     unit = min(session.volume.spacing)  # heights are opacity per voxel
     for rank, (tf, rating) in enumerate(best, start=1):
         tf = replace(tf.unfreeze(), value_range=session.volume.value_range, name=f"rank{rank:02d}")
-        stem = rd.best_dir / f"rank{rank:02d}"
+        stem = rd.best_stem(rank)
         image = session.render(tf)
         record = render_record(session.camera, (image.shape[1], image.shape[0]),
                                session.volume.name, shading=session.settings.shading)  # fmt: skip
@@ -57,8 +57,9 @@ def write_run_outputs(session: Session) -> None:
             atomic_write_bytes(
                 stem.with_name(stem.name + suffix), export_tf(tf, fmt, unit_distance=unit).encode()
             )
-        summary.append({"rank": rank, "rating": rating, "tf": f"best/rank{rank:02d}.tf.json"})
-    atomic_write_json(rd.best_dir / "summary.json", summary)
+        tf_file = rd.best_file(rank, ".tf.json").relative_to(rd.root).as_posix()
+        summary.append({"rank": rank, "rating": rating, "tf": tf_file})
+    atomic_write_json(rd.best_summary, summary)
     records = evolution_records(rd.generations())
     if records:
         atomic_write_bytes(rd.root / "evolution.png", evolution_plot(records))

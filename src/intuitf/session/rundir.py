@@ -1,16 +1,21 @@
 """The run directory: where a session keeps everything it has paid for.
 
-Layout::
+This module alone knows the folder's layout; everything else asks a :class:`RunDirectory` for
+its paths (``rd.run_json``, ``rd.best_file(1, ".tf.json")``, ...) or reads through
+:class:`~intuitf.session.store.RunStore`. Layout::
 
     run.json            inputs, settings, seed, versions (written once, updated on resume)
     journal.jsonl       append-only; one JSON object per line (generation, stage, end, ...)
+    events.jsonl        append-only; the run's numbered events (progress, verdicts, ...)
     checkpoint.json     the latest resumable state, replaced atomically
+    checkpoints/        gen000.json ...: the state at the start of each generation (branching)
     verdicts.sqlite     every model verdict, keyed by the content of the question
-    population/         current population as TF JSON (one file, replaced atomically)
-    best/               rank01.png, rank01.tf.json, rank01.tf.png and exports
-    generations/        gen000.png contact sheets
+    intent/             the intent's pictures (reference, sketch, base)
+    best/               rank01.png, rank01.tf.json, rank01.tf.png, exports, summary.json
+    generations/        gen000.png contact sheets, gen000-best.png
     evolution.png       ratings, calls, cost and time per generation
     report.html         a self-contained page with all of it
+    .lock               held by the one process that drives the run (see ``lock``)
 
 Every write is atomic (temporary file + rename) or an fsync'ed append, so a crash, a kill or a
 full disk never leaves a half-written file behind.
@@ -99,8 +104,35 @@ class RunDirectory:
         return self.root / "checkpoints" / f"gen{generation:03d}.json"
 
     @property
-    def population_file(self) -> Path:
-        return self.root / "population" / "current.json"
+    def best_summary(self) -> Path:
+        """``best/summary.json``: rank, rating and TF file of each kept result."""
+        return self.best_dir / "summary.json"
+
+    def best_stem(self, rank: int) -> Path:
+        """``best/rankNN`` (no suffix): the stem of the rank-th result's files."""
+        return self.best_dir / f"rank{int(rank):02d}"
+
+    def best_file(self, rank: int = 1, suffix: str = ".png") -> Path:
+        """A file of the rank-th result: ``.png`` (its rendering), ``.tf.json`` (its TF),
+        ``.tf.png`` (the TF's plot), or an export's suffix."""
+        stem = self.best_stem(rank)
+        return stem.with_name(stem.name + suffix)
+
+    def best_ranks(self) -> list[int]:
+        """The ranks that have files in ``best/``, in order."""
+        import re
+
+        found = set()
+        for p in self.best_dir.glob("rank*"):
+            m = re.match(r"rank(\d+)\.", p.name)
+            if m:
+                found.add(int(m.group(1)))
+        return sorted(found)
+
+    def generation_sheet(self, generation: int, best: bool = False) -> Path:
+        """``generations/genNNN.png`` (the contact sheet) or ``genNNN-best.png``."""
+        tail = "-best" if best else ""
+        return self.generations_dir / f"gen{int(generation):03d}{tail}.png"
 
     # -- lifecycle ------------------------------------------------------------------------
     def exists(self) -> bool:

@@ -188,7 +188,7 @@ class Session(SessionOpening, SessionInteraction):
         self._images: dict[str, np.ndarray] = {}
         self.records: list[GenerationRecord] = []
         self.generation_seconds: list[float] = []
-        self.events = EventLog(self.name, run_dir.root / "events.jsonl" if run_dir else None)
+        self.events = EventLog(self.name, run_dir.events if run_dir else None)
         self._lock = lock
         self._state_lock = threading.RLock()
         self._status = "idle"
@@ -385,9 +385,7 @@ class Session(SessionOpening, SessionInteraction):
 
     # -- the loop -------------------------------------------------------------------------
     async def astep(self) -> GenerationRecord:
-        """Run one generation: ask, render, judge, tell, journal, checkpoint."""
-        from intuitf.evaluator.tournament import SwissTournament
-
+        """Run one generation: ask, render, judge, tell, record (journal, checkpoint, events)."""
         if self.done:
             raise SessionError("This run has already done all its generations.")
         if self._stepping:
@@ -398,190 +396,229 @@ class Session(SessionOpening, SessionInteraction):
         try:
             t0 = time.perf_counter()
             g = self.generation
-            candidates = self.explorer.ask()
-            self.events.emit(
-                "generation_started", generation=g, stage=self.stage, population=len(candidates)
-            )
-            ids = [c.id for c in candidates]
-            for c in candidates:
-                self.tfs[c.id] = c.tf
-            sched = render_scheduler()
-            cache = await sched.run(self._timed(self.sample_cache), BATCH)
-            todo = [c for c in candidates if c.id not in self._images]
-            if getattr(self.renderer, "device", "cpu") == "cuda" and todo:
-                # On the GPU a whole generation renders in one launch.
-                batch = await sched.run(
-                    self._timed(lambda: cache.render_many([c.tf for c in todo])), BATCH
-                )
-                self._images.update({c.id: img for c, img in zip(todo, batch, strict=True)})
-            images = []
-            for c in candidates:  # one job each, so interactive renders can go between them
-                job = self._timed(functools.partial(self.image, c.id, c.tf))
-                images.append(await sched.run(job, BATCH))
-            self.events.emit("rendered", generation=g, candidates=ids)
-
-            stage_aspects = getattr(self.explorer, "aspects", None) or {
-                "initialize": "quality",
-                "customize": "intent",
-                "refine": "edit",
-            }.get(self.stage, "quality")
-            aspects = _aspects_for_stage(stage_aspects, self.intent)
-            prior = {cid: self.ratings[cid] for cid in ids if cid in self.ratings}
-            tournament = SwissTournament(
-                self._tournament_judge(),
-                aspects,
-                self.intent,
-                seed=_generation_seed(self.settings.seed, g),
-                protocol=self.settings.protocol,  # type: ignore[arg-type]  # checked by RunSettings
-            )
-            history = self.stage_games + self._human_games()
+            candidates = self._ask(g)
+            images = await self._render(g, candidates)
             base_cost = Cost(**self.cost.to_dict())
-
-            def on_match(m) -> None:
-                v = m.verdict
-                self.events.emit(
-                    "match_judged",
-                    generation=g,
-                    round=m.round,
-                    first=m.first,
-                    second=m.second,
-                    winner=v.overall.value,
-                    p_first=v.p_first,
-                    per_aspect={k: c.value for k, c in v.per_aspect.items()},
-                    reasons=dict(v.rationale),
-                    cost=v.cost.to_dict(),
-                    cached=v.cached,
-                    error=v.error,
-                )
-
-            try:
-                result = await tournament.run(
-                    images, ids, prior=prior or None, history=history, on_match=on_match
-                )
-            except (BudgetExhausted, JudgeError, RunCancelled) as exc:
-                partial = getattr(exc, "partial", None)
-                if partial is not None:
-                    self.cost = _paid(self.judge, base_cost + partial.cost, self.run_dir)
-                    self._journal(
-                        {
-                            "type": "partial",
-                            "generation": g,
-                            "reason": type(exc).__name__,
-                            "tournament": _safe_dict(partial),
-                        }
-                    )
-                raise
-
-            # A person's verdicts of this stage join the fit; without any, the model's ranking
-            # stands exactly as the tournament gave it.
-            self._pre_tell = self.explorer.state_dict()
-            self._model_ranking = list(result.ranking)
-            self._model_ratings = {cid: float(result.ratings[cid]) for cid in ids}
-            self.stage_games = self.stage_games + [
-                (m.first, m.second, float(m.verdict.p_first)) for m in result.matches
-            ]
-            self._judged_games, self._judged_stage = list(self.stage_games), self.stage_index
-            human = self._human_games()
-            if human:
-                ranking, ratings = refit_ranking(
-                    ids,
-                    self.stage_games + human,
-                    tiebreak=list(result.ranking),
-                    stated=stated_orders(self.human, self.stage_index),
-                )
-            else:
-                ranking, ratings = list(result.ranking), dict(self._model_ratings)
-            # Fitness comes from the ranking and the stage's pressure schedule.
-            self.explorer.tell(ranking)
-            seconds = time.perf_counter() - t0
-            self.cost = _paid(self.judge, base_cost + result.cost, self.run_dir)
-            self.cost.seconds = base_cost.seconds + seconds
-            self.ratings = ratings
-            self.last_ranking = ranking
-            rank_of = {cid: i + 1 for i, cid in enumerate(ranking)}
-            cand_records = [
-                {
-                    "id": c.id,
-                    "tf": c.tf.to_dict(),
-                    "rating": self.ratings[c.id],
-                    "rank": rank_of[c.id],
-                    "origin": c.origin,
-                    "parents": list(c.parents),
-                }
-                for c in candidates
-            ]
-            stats = _match_stats(result.matches)
-            record = GenerationRecord(
-                generation=g,
-                stage=self.stage,
-                ranking=list(ranking),
-                ratings=dict(self.ratings),
-                candidates=cand_records,
-                cost=result.cost,
-                seconds=seconds,
-                match_stats=stats,
-            )
-            self.records.append(record)
-            self.generation_seconds.append(seconds)
-            self._journal(
-                {
-                    "type": "generation",
-                    "generation": g,
-                    "stage": self.stage,
-                    "candidates": cand_records,
-                    "best_id": record.best_id,
-                    "rounds": result.rounds,
-                    **self._paid_this_generation(result.cost),
-                    "cached_calls": result.cost.cached_calls,
-                    "failed_calls": result.cost.failed_calls,
-                    "seconds": seconds,
-                    "match_stats": stats,
-                    "decided": stats["decided"],
-                    "undecided": stats["undecided"],
-                    "retried": stats["retried"],
-                    "indistinct": bool(stats["indistinct"]),
-                    "matches": [_match_dict(m) for m in result.matches],
-                }
-            )
-            self._write_generation_pictures(g, candidates, ranking)
-            keep = set(ids)
-            self._images = {k: v for k, v in self._images.items() if k in keep}
-            self.tfs = {k: v for k, v in self.tfs.items() if k in keep}
-
-            self.generation += 1
-            new_stage = None
-            if self.generation >= self._stage_end() and self.stage_index + 1 < len(self.plan):
-                self.stage_games = []  # other aspects: earlier verdicts answer another question
-                self.stage_index += 1
-                new_stage = self.plan[self.stage_index]
-                self.explorer.set_stage(new_stage[0], generations=new_stage[1])
-                self._journal(
-                    {"type": "stage", "generation": self.generation, "stage": new_stage[0]}
-                )
-            self._checkpoint()
-            self.events.emit(
-                "generation_ended",
-                generation=g,
-                stage=record.stage,
-                ranking=ranking,
-                ratings=self.ratings,
-                best=ranking[0],
-                cost=self.cost.to_dict(),
-                generation_cost=result.cost.to_dict(),
-                seconds=seconds,
-                match_stats=stats,
-            )
-            if new_stage is not None:
-                self.events.emit(
-                    "stage_started",
-                    stage=new_stage[0],
-                    generations=new_stage[1],
-                    generation=self.generation,
-                )
-            return record
+            result = await self._judge(g, candidates, images, base_cost)
+            ranking, ratings = self._tell(candidates, result)
+            return self._record(g, t0, candidates, result, base_cost, ranking, ratings)
         finally:
             self._stepping = False
             self._refresh("idle")
+
+    # -- the parts of a generation ---------------------------------------------------------
+    def _ask(self, g: int) -> list[Any]:
+        """The Explorer's candidates for generation ``g`` (announced, their TFs kept)."""
+        candidates = list(self.explorer.ask())
+        self.events.emit(
+            "generation_started", generation=g, stage=self.stage, population=len(candidates)
+        )
+        for c in candidates:
+            self.tfs[c.id] = c.tf
+        return candidates
+
+    async def _render(self, g: int, candidates: list[Any]) -> list[np.ndarray]:
+        """Each candidate's judging picture, rendered on the render thread (one job each, so
+        interactive renders can go between them; on the GPU a generation is one launch)."""
+        ids = [c.id for c in candidates]
+        sched = render_scheduler()
+        cache = await sched.run(self._timed(self.sample_cache), BATCH)
+        todo = [c for c in candidates if c.id not in self._images]
+        if getattr(self.renderer, "device", "cpu") == "cuda" and todo:
+            batch = await sched.run(
+                self._timed(lambda: cache.render_many([c.tf for c in todo])), BATCH
+            )
+            self._images.update({c.id: img for c, img in zip(todo, batch, strict=True)})
+        images = []
+        for c in candidates:
+            job = self._timed(functools.partial(self.image, c.id, c.tf))
+            images.append(await sched.run(job, BATCH))
+        self.events.emit("rendered", generation=g, candidates=ids)
+        return images
+
+    async def _judge(
+        self, g: int, candidates: list[Any], images: list[np.ndarray], base_cost: Cost
+    ) -> Any:
+        """The generation's Swiss tournament (seeded by the run and the generation, so a
+        replay asks the same questions); a stopped tournament's partial cost is journaled."""
+        from intuitf.evaluator.tournament import SwissTournament
+
+        ids = [c.id for c in candidates]
+        stage_aspects = getattr(self.explorer, "aspects", None) or {
+            "initialize": "quality",
+            "customize": "intent",
+            "refine": "edit",
+        }.get(self.stage, "quality")
+        aspects = _aspects_for_stage(stage_aspects, self.intent)
+        prior = {cid: self.ratings[cid] for cid in ids if cid in self.ratings}
+        tournament = SwissTournament(
+            self._tournament_judge(),
+            aspects,
+            self.intent,
+            seed=_generation_seed(self.settings.seed, g),
+            protocol=self.settings.protocol,  # type: ignore[arg-type]  # checked by RunSettings
+        )
+        history = self.stage_games + self._human_games()
+
+        def on_match(m: Any) -> None:
+            v = m.verdict
+            self.events.emit(
+                "match_judged",
+                generation=g,
+                round=m.round,
+                first=m.first,
+                second=m.second,
+                winner=v.overall.value,
+                p_first=v.p_first,
+                per_aspect={k: c.value for k, c in v.per_aspect.items()},
+                reasons=dict(v.rationale),
+                cost=v.cost.to_dict(),
+                cached=v.cached,
+                error=v.error,
+            )
+
+        try:
+            return await tournament.run(
+                images, ids, prior=prior or None, history=history, on_match=on_match
+            )
+        except (BudgetExhausted, JudgeError, RunCancelled) as exc:
+            partial = getattr(exc, "partial", None)
+            if partial is not None:
+                self.cost = _paid(self.judge, base_cost + partial.cost, self.run_dir)
+                self._journal(
+                    {
+                        "type": "partial",
+                        "generation": g,
+                        "reason": type(exc).__name__,
+                        "tournament": _safe_dict(partial),
+                    }
+                )
+            raise
+
+    def _tell(self, candidates: list[Any], result: Any) -> tuple[list[str], dict[str, float]]:
+        """The generation's ranking (the model's, refit with a person's verdicts of this
+        stage when there are any), told to the Explorer."""
+        ids = [c.id for c in candidates]
+        # A person's verdicts of this stage join the fit; without any, the model's ranking
+        # stands exactly as the tournament gave it.
+        self._pre_tell = self.explorer.state_dict()
+        self._model_ranking = list(result.ranking)
+        self._model_ratings = {cid: float(result.ratings[cid]) for cid in ids}
+        self.stage_games = self.stage_games + [
+            (m.first, m.second, float(m.verdict.p_first)) for m in result.matches
+        ]
+        self._judged_games, self._judged_stage = list(self.stage_games), self.stage_index
+        human = self._human_games()
+        if human:
+            ranking, ratings = refit_ranking(
+                ids,
+                self.stage_games + human,
+                tiebreak=list(result.ranking),
+                stated=stated_orders(self.human, self.stage_index),
+            )
+        else:
+            ranking, ratings = list(result.ranking), dict(self._model_ratings)
+        # Fitness comes from the ranking and the stage's pressure schedule.
+        self.explorer.tell(ranking)
+        return ranking, ratings
+
+    def _record(
+        self,
+        g: int,
+        t0: float,
+        candidates: list[Any],
+        result: Any,
+        base_cost: Cost,
+        ranking: list[str],
+        ratings: dict[str, float],
+    ) -> GenerationRecord:
+        """Account, journal and checkpoint generation ``g``; move to the next (and to the next
+        stage when this one is done); announce it."""
+        ids = [c.id for c in candidates]
+        seconds = time.perf_counter() - t0
+        self.cost = _paid(self.judge, base_cost + result.cost, self.run_dir)
+        self.cost.seconds = base_cost.seconds + seconds
+        self.ratings = ratings
+        self.last_ranking = ranking
+        rank_of = {cid: i + 1 for i, cid in enumerate(ranking)}
+        cand_records = [
+            {
+                "id": c.id,
+                "tf": c.tf.to_dict(),
+                "rating": self.ratings[c.id],
+                "rank": rank_of[c.id],
+                "origin": c.origin,
+                "parents": list(c.parents),
+            }
+            for c in candidates
+        ]
+        stats = _match_stats(result.matches)
+        record = GenerationRecord(
+            generation=g,
+            stage=self.stage,
+            ranking=list(ranking),
+            ratings=dict(self.ratings),
+            candidates=cand_records,
+            cost=result.cost,
+            seconds=seconds,
+            match_stats=stats,
+        )
+        self.records.append(record)
+        self.generation_seconds.append(seconds)
+        self._journal(
+            {
+                "type": "generation",
+                "generation": g,
+                "stage": self.stage,
+                "candidates": cand_records,
+                "best_id": record.best_id,
+                "rounds": result.rounds,
+                **self._paid_this_generation(result.cost),
+                "cached_calls": result.cost.cached_calls,
+                "failed_calls": result.cost.failed_calls,
+                "seconds": seconds,
+                "match_stats": stats,
+                "decided": stats["decided"],
+                "undecided": stats["undecided"],
+                "retried": stats["retried"],
+                "indistinct": bool(stats["indistinct"]),
+                "matches": [_match_dict(m) for m in result.matches],
+            }
+        )
+        self._write_generation_pictures(g, candidates, ranking)
+        keep = set(ids)
+        self._images = {k: v for k, v in self._images.items() if k in keep}
+        self.tfs = {k: v for k, v in self.tfs.items() if k in keep}
+
+        self.generation += 1
+        new_stage = None
+        if self.generation >= self._stage_end() and self.stage_index + 1 < len(self.plan):
+            self.stage_games = []  # other aspects: earlier verdicts answer another question
+            self.stage_index += 1
+            new_stage = self.plan[self.stage_index]
+            self.explorer.set_stage(new_stage[0], generations=new_stage[1])
+            self._journal({"type": "stage", "generation": self.generation, "stage": new_stage[0]})
+        self._checkpoint()
+        self.events.emit(
+            "generation_ended",
+            generation=g,
+            stage=record.stage,
+            ranking=ranking,
+            ratings=self.ratings,
+            best=ranking[0],
+            cost=self.cost.to_dict(),
+            generation_cost=result.cost.to_dict(),
+            seconds=seconds,
+            match_stats=stats,
+        )
+        if new_stage is not None:
+            self.events.emit(
+                "stage_started",
+                stage=new_stage[0],
+                generations=new_stage[1],
+                generation=self.generation,
+            )
+        return record
 
     async def arun(self, *, write_outputs: bool = True) -> RunOutcome:
         """Run generations until the plan is done or something stops the run cleanly.
@@ -801,14 +838,12 @@ class Session(SessionOpening, SessionInteraction):
         imgs = [self._images[c.id] for c in ordered]
         caps = [f"#{order[c.id] + 1} {c.id} {self.ratings[c.id]:.0f}" for c in ordered]
         sheet = contact_sheet(imgs, caps, columns=8)
-        atomic_write_bytes(self.run_dir.generations_dir / f"gen{g:03d}.png", png_bytes(sheet))
+        atomic_write_bytes(self.run_dir.generation_sheet(g), png_bytes(sheet))
         # The generation's best, small, for the history view.
         best = self._images[ordered[0].id]
         record = render_record(self.camera, (best.shape[1], best.shape[0]), self.volume.name,
                                shading=self.settings.shading)  # fmt: skip
-        atomic_write_bytes(
-            self.run_dir.generations_dir / f"gen{g:03d}-best.png", png_bytes(best, record)
-        )
+        atomic_write_bytes(self.run_dir.generation_sheet(g, best=True), png_bytes(best, record))
 
 
 # -- helpers --------------------------------------------------------------------------------

@@ -106,7 +106,7 @@ class RunStore:
         if not self.root.is_dir():
             return []
         return sorted(
-            p.name for p in self.root.iterdir() if p.is_dir() and (p / "run.json").is_file()
+            p.name for p in self.root.iterdir() if p.is_dir() and RunDirectory(p).exists()
         )
 
     def runs(self) -> list[RunInfo]:
@@ -173,7 +173,7 @@ class RunStore:
             rating = next(
                 (c.get("rating") for c in e.get("candidates", []) if c["id"] == best), None
             )
-            thumb = rd.generations_dir / f"gen{g:03d}-best.png"
+            thumb = rd.generation_sheet(g, best=True)
             out.append(
                 {
                     "generation": g,
