@@ -73,7 +73,7 @@ def judging_camera(spec: RunSpec, volume: Any = None, root: Path | None = None) 
     return default_camera(volume, spec)
 
 
-def build_judge(spec: JudgeSpec, run_dir: Path | None, protocol: str = "efficient"):
+def build_judge(spec: JudgeSpec, run_dir: Path | None, protocol: str = "efficient") -> Any:
     """The judge ``spec`` names, with its verdict store in ``run_dir`` and its budget.
 
     The efficient tournament shows each pair in a seeded random order and re-asks only
@@ -115,7 +115,9 @@ def build_judge(spec: JudgeSpec, run_dir: Path | None, protocol: str = "efficien
     return judge
 
 
-def resumed_judge_spec(spec: JudgeSpec, evaluator: str | None, base_url: str | None):
+def resumed_judge_spec(
+    spec: JudgeSpec, evaluator: str | None, base_url: str | None
+) -> tuple[JudgeSpec, bool]:
     """The judge spec a resume uses, and whether the run moves to another model or server.
 
     A recorded address whose credentials were redacted must be given again (the error says so).
