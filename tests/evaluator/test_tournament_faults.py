@@ -36,10 +36,10 @@ class FlakyJudge:
         return Verdict({"quality": choice}, choice, choice.score, cost=Cost(calls=1))
 
 
-def _play(judge, n=16, **kw) -> TournamentResult:
+def _play(judge, n=16, protocol="paper", **kw) -> TournamentResult:
     images = [np.full((4, 4, 3), 10 + 10 * i, np.uint8) for i in range(n)]
     ids = [f"c{i}" for i in range(n)]
-    t = SwissTournament(judge, ASPECTS, seed=3, recheck_above=None, **kw)
+    t = SwissTournament(judge, ASPECTS, seed=3, recheck_above=None, protocol=protocol, **kw)
     return asyncio.run(t.run(images, ids))
 
 
@@ -82,3 +82,17 @@ def test_one_bad_round_is_bad_luck_not_a_judge_that_is_down():
     # Most of every other round failing never makes two rounds in a row.
     result = _play(FlakyJudge(fail={*range(1, 7), *range(17, 23)}))
     assert result.complete and result.match_stats().undecided == 12
+
+
+def test_the_efficient_protocol_asks_an_undecided_match_again_in_the_other_order():
+    judge = FlakyJudge(fail={3, 12})
+    result = _play(judge, protocol="efficient")
+    assert result.complete
+    assert judge.calls == 8 * result.rounds + 2  # one more ask per undecided match
+    assert result.match_stats().undecided == 0
+    again = [m for m in result.matches if m.rechecked]
+    assert len(again) == 2 and all(m.verdict.decided for m in again)
+    # The second answer stands alone (the brighter image wins), not averaged with a tie.
+    for m in again:
+        brighter_first = int(m.first[1:]) > int(m.second[1:])
+        assert m.verdict.p_first == (1.0 if brighter_first else 0.0)

@@ -49,9 +49,10 @@ could not read, and the tournament goes on. Only when the judge is down, when mo
 the requests of two rounds in a row got no answer (a server that is unreachable, rejects the
 key, or stopped answering for longer than the answer deadline fails them all; one bad round of
 a small field can be bad luck), does the tournament stop with a :class:`JudgeError` that says
-so; the failed matches of that last round are then not recorded. Undecided matches are not
-cached, so a resumed run asks them again. A re-ask that fails leaves its match's first verdict
-as it was. Results are
+so; the failed matches of that last round are then not recorded. Under the efficient
+protocol an undecided match (no answer, or none usable) is asked once more, in the other order,
+with the next round, and that answer stands in its place. Undecided matches are not cached, so
+a resumed run asks them again. A re-ask that fails leaves its match's first verdict as it was. Results are
 reproducible: with the same seed and the same verdicts the pairings and ratings are the same,
 whatever order the concurrent matches finish in, because updates are applied in schedule order.
 """
@@ -235,6 +236,8 @@ class _State:
         self.cost = Cost()
         self.rounds = cfg.planned_rounds(self.n)
         self.recheck_above = cfg.recheck_above if cfg.protocol == "efficient" else None
+        #: Efficient protocol: an undecided match is asked once more, in the other order.
+        self.reask_undecided = cfg.protocol == "efficient"
         #: Matches to re-ask in the other order: (index in matches, first, second).
         self.pending: list[tuple[int, int, int]] = []
         self.on_match: MatchFn | None = None
@@ -383,7 +386,11 @@ class _State:
             self.matches.append(MatchRecord(rnd, self.ids[a], self.ids[b], out))
             if self.on_match is not None:
                 self.on_match(self.matches[-1])
-            if fit_before is not None and s in (0.0, 1.0):
+            if self.reask_undecided and not out.decided:
+                # No usable answer (or none at all): ask once more, in the other order (a new
+                # question, so no cache repeats the failure), with the next round.
+                self.pending.append((len(self.matches) - 1, a, b))
+            elif fit_before is not None and s in (0.0, 1.0):
                 # A surprise (the fit gave the loser a good chance) is the verdict most likely
                 # to be a judge error: ask it again in the other order next round.
                 p_loser = elo_expected(fit_before[b], fit_before[a]) if s == 1.0 else (
@@ -399,7 +406,10 @@ class _State:
                 failure = failure or out
                 continue
             rec = self.matches[idx]
-            rec.verdict = _merge(rec.verdict, out.swapped(), cfg.aspects)
+            if rec.verdict.decided:
+                rec.verdict = _merge(rec.verdict, out.swapped(), cfg.aspects)
+            else:  # the first ask told nothing: the second answer stands alone
+                rec.verdict = _instead(rec.verdict, out.swapped())
             rec.rechecked = True
             i, j, _ = self.games[idx]
             self.games[idx] = (i, j, min(1.0, max(0.0, float(rec.verdict.p_first))))
@@ -458,6 +468,21 @@ def _judge_down(rnd: int, failed: int, asked: int, last: JudgeError) -> JudgeErr
         f"did most of the round before (last: {reason}).",
         getattr(last, "hint", None)
         or "Check the model server; continue with `intuitf optimize --resume RUN`.",
+    )
+
+
+def _instead(undecided: Verdict, answer: Verdict) -> Verdict:
+    """``answer`` in place of an undecided verdict, carrying what both cost."""
+    errors = [e for e in (undecided.error, answer.error) if e]
+    return Verdict(
+        per_aspect=dict(answer.per_aspect),
+        overall=answer.overall,
+        p_first=answer.p_first,
+        cost=undecided.cost + answer.cost,
+        rationale=dict(answer.rationale),
+        cached=undecided.cached and answer.cached,
+        error="; ".join(errors) if answer.error else None,
+        retries=undecided.retries + answer.retries,
     )
 
 
