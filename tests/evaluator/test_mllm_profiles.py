@@ -417,3 +417,19 @@ def test_request_log_shortens_images(oracle_images):
         )
     text = json.dumps(srv.requests_log[0])
     assert "bytes>" in text and len(text) < 20_000
+
+
+def test_optimize_refuses_a_money_budget_for_a_model_of_unknown_price(tmp_path):
+    import subprocess
+    import sys
+
+    run = tmp_path / "r"
+    proc = subprocess.run(
+        [sys.executable, "-m", "intuitf", "optimize", "phantom", "--evaluator",
+         "http://127.0.0.1:9/v1#mystery", "--budget-usd", "1", "-o", str(run)],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    said = " ".join((proc.stdout + proc.stderr).split())
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert "No price is known" in said and "--price" in said and "--unpriced" in said
+    assert not (run / "run.json").exists()
