@@ -61,6 +61,8 @@ class Structure:
     shape: str  # "thin", "elongated", "branching", "plate", "blob", "shell", "scattered"
     background: bool = False
     name: str | None = None  # given by a model or a label atlas
+    #: (x0, y0, z0, x1, y1, z1), 0..1 along each axis of the box
+    bbox: tuple[float, float, float, float, float, float] = (0.0, 0.0, 0.0, 1.0, 1.0, 1.0)
 
     @property
     def center(self) -> float:
@@ -133,7 +135,9 @@ class StructureMap:
         ss = []
         for s in d.get("structures", []):
             s = dict(s)
-            for k in ("value_range", "material_range", "centroid", "extents"):
+            for k in ("value_range", "material_range", "centroid", "extents", "bbox"):
+                if k not in s:
+                    continue
                 s[k] = tuple(s[k])
             ss.append(Structure(**s))
         return cls(
@@ -307,7 +311,11 @@ def _describe(
     idx = np.argwhere(mask)  # (z, y, x)
     vals = small[mask]
     lo, hi = (float(v) for v in np.percentile(vals, [5, 95]))
-    cen = idx.mean(axis=0) / np.maximum(np.asarray(shape) - 1, 1)
+    norm = np.maximum(np.asarray(shape) - 1, 1)
+    cen = idx.mean(axis=0) / norm
+    lo_c, hi_c = idx.min(axis=0) / norm, idx.max(axis=0) / norm
+    bbox = (float(lo_c[2]), float(lo_c[1]), float(lo_c[0]),
+            float(hi_c[2]), float(hi_c[1]), float(hi_c[0]))  # fmt: skip
     centroid = (float(cen[2]), float(cen[1]), float(cen[0]))
     arr_ax = 2 - up_ax
     lo_i, hi_i = span if span is not None else (0, shape[arr_ax] - 1)
@@ -338,7 +346,7 @@ def _describe(
         share=float(mask.sum() / n_fg) if not background else 0.0, centroid=centroid,
         height=float(h), position=position, outer=outer, enclosed_by=None,
         extents=extents, thickness=thickness, pieces=int(pieces), shape=shape_word,  # type: ignore[arg-type]
-        background=background,
+        background=background, bbox=bbox,
     )  # fmt: skip
 
 

@@ -270,7 +270,10 @@ class FakeMLLMServer:
         hang_seconds: float = 30.0,
         model: str = "default",
         personality: str | Personality | None = None,
+        labeller: Any = None,
     ) -> None:
+        #: Answers structure-atlas requests (:class:`intuitf.testing.fake_labels.LabelNamer`).
+        self.labeller = labeller
         if score is None and target is None:
             raise ValueError("give a target image or a score function")
         self.score = score if score is not None else TargetOracle(target)  # type: ignore[arg-type]
@@ -394,6 +397,8 @@ class FakeMLLMServer:
                 self.stats.max_in_flight = max(self.stats.max_in_flight, self.stats.in_flight)
             try:
                 rule = self._rules(body)
+                if rule is None and self.labeller is not None and _atlas_request(body):
+                    rule = 200, _completion(body, self.labeller.answer(body), self.model), {}
                 if rule is not None:
                     status, payload, headers = rule
                 elif self.personality.slots:
@@ -705,6 +710,24 @@ def oracle_choice(
     if choice != "cannot decide" and u_noise < noise:
         choice = "second" if choice == "first" else "first"
     return choice
+
+
+def _atlas_request(body: dict) -> bool:
+    from intuitf.testing.fake_labels import is_atlas_request
+
+    return is_atlas_request(body)
+
+
+def _completion(body: dict, content: str, model: str) -> dict:
+    """A plain chat completion carrying ``content``."""
+    return {
+        "id": "fake-atlas", "object": "chat.completion", "created": int(time.time()),
+        "model": body.get("model", model),
+        "choices": [{"index": 0, "message": {"role": "assistant", "content": content},
+                     "finish_reason": "stop"}],
+        "usage": {"prompt_tokens": 0, "completion_tokens": len(content) // 4,
+                  "total_tokens": len(content) // 4},
+    }  # fmt: skip
 
 
 def _error(message: str, kind: str) -> dict:
