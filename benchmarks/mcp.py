@@ -115,6 +115,7 @@ async def session(client, data: Path, max_dim: int, model_url: str, quick: bool)
         if not got["live"] and got["status"] != "finishing":
             break
     await call("run_status", "run_status (all events)", run=run, since=0, limit=500)
+    await call("run_status", "run_status (+ matches)", run=run, since=0, limit=500, matches=True)
     gal = await call("gallery", run=run, k=4, size=192)
     await call("gallery", "gallery k=8 size 256", run=run, k=8, size=256)
     ids = [c["id"] for c in gal["candidates"]]

@@ -79,11 +79,14 @@ async def scenario(client: Client, folders, model_url: str) -> dict:
     assert waited["outcome"] in ("generation_ended", "run_ended")
     types = [e["type"] for e in waited["events"]]
     assert "generation_ended" in types
-    all_events = await call(client, "run_status", run=run, since=0, limit=500)
+    all_events = await call(client, "run_status", run=run, since=0, limit=500, matches=True)
     seqs = [e["seq"] for e in all_events["events"]]
     assert seqs == sorted(seqs) and seqs[0] == 1
     later = await call(client, "run_status", run=run, since=all_events["next_since"])
     assert all(e["seq"] > all_events["next_since"] for e in later["events"])
+    brief = await call(client, "run_status", run=run, since=0, limit=500)
+    assert brief["events"] and all(e["type"] != "match_judged" for e in brief["events"])
+    assert brief["next_since"] >= all_events["next_since"]
     assert any(e["type"] == "match_judged" and e["data"]["reasons"] for e in all_events["events"])
     final = await wait_run_end(client, run)
     assert final["info"]["status"] == "completed" and final["info"]["generations_done"] == 2

@@ -223,7 +223,7 @@ class RunDesk:
             runs.append(d)
         return _reply({"runs": runs, "root": str(self.store.root)})
 
-    def status(self, name: str, since: int = 0, limit: int = 50) -> Reply:
+    def status(self, name: str, since: int = 0, limit: int = 50, matches: bool = False) -> Reply:
         from intuitf.session import RunDirectory
         from intuitf.session.events import read_events
 
@@ -243,7 +243,13 @@ class RunDesk:
             }  # fmt: skip
             events = [e for e in read_events(RunDirectory(info.path).events) if e.seq > int(since)]
         limit = max(1, min(int(limit), 500))
-        shown = events[:limit]
+        # Each match's verdict is the bulk of a run's events: only when asked for.
+        kept = [e for e in events if matches or e.type != "match_judged"]
+        shown = kept[:limit]
+        if len(kept) > limit:
+            next_since = shown[-1].seq
+        else:
+            next_since = events[-1].seq if events else int(since)
         return _reply(
             {
                 "run": name,
@@ -252,12 +258,14 @@ class RunDesk:
                 "progress": progress,
                 "info": _info(info),
                 "events": [_event(e) for e in shown],
-                "next_since": shown[-1].seq if shown else int(since),
-                "more_events": len(events) > len(shown),
+                "next_since": next_since,
+                "more_events": len(kept) > len(shown),
             }
         )
 
-    async def wait(self, name: str, timeout_s: float, since: int | None) -> Reply:
+    async def wait(
+        self, name: str, timeout_s: float, since: int | None, matches: bool = False
+    ) -> Reply:
         """Wait until a generation after ``since`` (default: now) ends, or the run ends."""
         self.check_run(name)
         timeout = max(0.0, min(float(timeout_s), MAX_WAIT))
@@ -291,7 +299,7 @@ class RunDesk:
         entry = self.registry.entry(name)
         if entry is not None and (live is None or ended or not entry.live):
             await entry.wait_closed(max(timeout, 5.0))
-        reply = await asyncio.to_thread(self.status, name, since_out, 50)
+        reply = await asyncio.to_thread(self.status, name, since_out, 50, matches)
         ended = [e for e in reply.data["events"] if e["type"] == "run_ended"]
         if ended:
             outcome = "run_ended"

@@ -348,10 +348,13 @@ def register(server: MCPServer, svc: McpService, results: Results) -> None:
             ),
         ] = 0,
         limit: Annotated[int, Field(ge=1, le=500, description="Most events to return.")] = 50,
+        matches: Annotated[
+            bool, Field(description="Include every judged match (winner, the judge's reasons).")
+        ] = False,
     ) -> CallToolResult:
         """A run's progress (stage, generation, matches, calls, cost, time left) and its events
-        since a sequence number."""  # fmt: skip
-        return await answer(lambda: _thread(desk.status, run, since, limit))
+        since a sequence number (generations, stages, verdicts, status, its end)."""
+        return await answer(lambda: _thread(desk.status, run, since, limit, matches))
 
     @server.tool(annotations=READ)
     async def wait_for_generation(
@@ -365,10 +368,13 @@ def register(server: MCPServer, svc: McpService, results: Results) -> None:
                 description="Wait for a generation ending after this event number (default: now)."
             ),
         ] = None,
+        matches: Annotated[
+            bool, Field(description="Include every judged match (winner, the judge's reasons).")
+        ] = False,
     ) -> CallToolResult:
         """Wait until the run's next generation ends (or the run ends, or the timeout passes);
         returns its status and the events meanwhile. Other tools keep working while it waits."""  # fmt: skip
-        return await answer(lambda: desk.wait(run, timeout_s, since))
+        return await answer(lambda: desk.wait(run, timeout_s, since, matches))
 
     @server.tool(annotations=WRITE)
     async def pause_run(run: RunName) -> CallToolResult:
