@@ -165,3 +165,36 @@ def test_a_rerun_that_finds_the_budget_spent_keeps_the_figures(batch_inputs, tmp
     assert again["totals"]["calls"] == first["totals"]["calls"] == sent > 0
     figures = {v["key"]: (v["calls"], v["generations_done"]) for v in first["volumes"]}
     assert {v["key"]: (v["calls"], v["generations_done"]) for v in again["volumes"]} == figures
+
+
+# -- the batch report ---------------------------------------------------------------------------
+def test_the_batch_report_is_self_contained_with_undecided_figures(batch_inputs, tmp_path):
+    import re
+
+    from intuitf.batch.plan import VolumeItem
+    from intuitf.batch.runner import write_result
+    from intuitf.batch.summary import build_summary, write_summary
+    from intuitf.imageio import load_image, save_png
+
+    root = tmp_path / "batch"
+    picture = load_image(batch_inputs["picture"])
+    save_png(picture, root / "reference" / "reference.png")
+    items = []
+    for i, (undecided, matches) in enumerate(((0, 40), (9, 30))):
+        key = f"a-rather-long-volume-name-{i}"
+        save_png(picture, root / "runs" / key / "best" / "rank01.png")
+        write_result(root, {"key": key, "label": key, "source": f"/v/{key}.npy",
+                            "status": "completed", "similarity": 0.9 - i / 2, "calls": 50,
+                            "matches": matches, "undecided": undecided,
+                            "best_png": f"runs/{key}/best/rank01.png", "run_dir": "x"})  # fmt: skip
+        items.append(VolumeItem(key, f"/v/{key}.npy", key))
+    summary = build_summary(root, items, {})
+    assert summary["totals"]["undecided"] == 9 and summary["totals"]["matches"] == 70
+    paths = write_summary(root, summary)
+    page = paths["report"].read_text()
+    srcs = re.findall(r'<img src="([^"]*)"', page)
+    assert len(srcs) == 4  # the reference, two bests, the contact sheet
+    assert all(s.startswith("data:image/png;base64,") for s in srcs)
+    assert "9 of 30 (30 %)" in page and "9 of 70 matches (13 %)" in page
+    sheet = load_image(paths["contact_sheet"])
+    assert sheet.shape[1] >= 3 * 320  # three tiles of 320 pixels side by side

@@ -363,6 +363,7 @@ class WorkerCore:
             outputs_s=float(result.get("outputs_s") or 0.0) + outputs_s,
             run_seconds=float(c.seconds),
         )
+        result.update(_match_figures(rd))
         best_png, best_tf = rd / "best" / "rank01.png", rd / "best" / "rank01.tf.json"
         if best_png.exists():
             from intuitf.imageio import load_image
@@ -405,6 +406,22 @@ class WorkerCore:
         except Exception:  # noqa: BLE001 - a figure for the report, never a failure
             start_sim = None
         return session, start_sim
+
+
+def _match_figures(run_dir: Path) -> dict:
+    """The run's matches, decided and undecided (no usable answer), from its journal."""
+    from intuitf.evaluator.matches import MatchStats
+    from intuitf.session.rundir import RunDirectory
+
+    try:
+        stats = MatchStats.from_journal(RunDirectory(run_dir).generations())
+    except Exception:  # noqa: BLE001 - figures for the report, never a failure
+        return {}
+    return {
+        "matches": stats.matches,
+        "undecided": stats.undecided,
+        "undecided_share": stats.undecided_share,
+    }
 
 
 def _message(exc: BaseException) -> str:

@@ -82,7 +82,12 @@ def build_summary(
         "open_s": sum(float(v.get("open_s") or 0.0) for v in volumes),
         "outputs_s": sum(float(v.get("outputs_s") or 0.0) for v in volumes),
         "mean_similarity": float(np.mean(sims)) if sims else None,
+        "matches": sum(int(v.get("matches") or 0) for v in volumes),
+        "undecided": sum(int(v.get("undecided") or 0) for v in volumes),
     }
+    totals["undecided_share"] = (
+        totals["undecided"] / totals["matches"] if totals["matches"] else 0.0
+    )
     if wall_s:
         totals["wall_s"] = wall_s
         totals["volumes_per_hour"] = 3600.0 * len(done) / wall_s if done else 0.0
@@ -111,12 +116,16 @@ def write_summary(root: Path, summary: dict) -> dict[str, Path]:
         paths["contact_sheet"] = root / "contact_sheet.png"
         atomic_write_bytes(paths["contact_sheet"], png_bytes(sheet))
     paths["report"] = root / "report.html"
-    atomic_write_bytes(paths["report"], report_html(summary).encode("utf-8"))
+    atomic_write_bytes(paths["report"], report_html(summary, root, sheet=sheet).encode("utf-8"))
     return paths
 
 
-def contact_sheet(root: Path, summary: dict, thumb: int = 160) -> np.ndarray | None:
-    """The reference, then every volume's best, captioned (flagged ones marked '!')."""
+def contact_sheet(root: Path, summary: dict, thumb: int = 320) -> np.ndarray | None:
+    """The reference, then every volume's best, captioned (flagged ones marked '!').
+
+    Tiles are ``thumb`` pixels, large enough to judge a look by; a caption starts with the
+    similarity, so a long volume name is what gets shortened, never the figure.
+    """
     from intuitf.imageio import load_image
     from intuitf.plots import contact_sheet as sheet
 
@@ -138,15 +147,15 @@ def contact_sheet(root: Path, summary: dict, thumb: int = 160) -> np.ndarray | N
         sim = _num(v.get("similarity"))
         mark = "! " if v.get("flagged") else ""
         cap = (
-            f"{mark}{v['key']} {sim:.2f}"
+            f"{mark}{sim:.2f} {v['key']}"
             if sim is not None
-            else f"{mark}{v['key']} {v.get('status')}"
+            else f"{mark}{v.get('status')} {v['key']}"
         )
         images.append(img)
         captions.append(cap)
     if not images:
         return None
-    return sheet(images, captions, columns=min(8, max(2, len(images))), thumb=thumb)
+    return sheet(images, captions, columns=min(4, max(2, len(images))), thumb=thumb)
 
 
 def _fmt(v: Any, spec: str, empty: str = "–") -> str:
@@ -154,18 +163,49 @@ def _fmt(v: Any, spec: str, empty: str = "–") -> str:
     return empty if f is None else format(f, spec)
 
 
-def report_html(summary: dict) -> str:
-    """A self-standing page (pictures linked relative to the batch folder)."""
+def _data_uri(path: Path | None, size: int | None = None) -> str | None:
+    """A picture file as a PNG data URI (scaled to fit ``size``), or None if unreadable."""
+    if path is None or not path.exists():
+        return None
+    try:
+        from PIL import Image
+
+        from intuitf.imageio import load_image, png_bytes
+
+        img = load_image(path)
+        if size is not None and max(img.shape[:2]) > size:
+            pic = Image.fromarray(img)
+            pic.thumbnail((size, size), Image.Resampling.LANCZOS)
+            img = np.asarray(pic)
+        return _png_uri(png_bytes(img))
+    except Exception:  # noqa: BLE001 - a picture that cannot be read is left out
+        return None
+
+
+def _png_uri(data: bytes) -> str:
+    import base64
+
+    return "data:image/png;base64," + base64.b64encode(data).decode("ascii")
+
+
+def _undecided_cell(v: dict) -> str:
+    n, m = int(v.get("undecided") or 0), int(v.get("matches") or 0)
+    return f"{n} of {m} ({100 * n / m:.0f} %)" if m else "–"
+
+
+def report_html(summary: dict, root: Path | None = None, sheet: np.ndarray | None = None) -> str:
+    """A self-contained page: the pictures (reference, each volume's best, the contact sheet)
+    are inside it, read from the batch folder ``root``; links go to each run's own report."""
+    from intuitf.evaluator.matches import UNDECIDED_WARNING
+    from intuitf.imageio import png_bytes
+
     t = summary["totals"]
     rows = []
     for v in summary["volumes"]:
         flagged = v.get("flagged")
-        img = (
-            f'<a href="{html.escape(v["best_png"])}"><img src="{html.escape(v["best_png"])}" '
-            'width="128" height="128" loading="lazy"></a>'
-            if v.get("best_png")
-            else ""
-        )
+        best = root / v["best_png"] if root is not None and v.get("best_png") else None
+        uri = _data_uri(best, 256)
+        img = f'<img src="{uri}" width="128" height="128" alt="best">' if uri else ""
         report = (
             f'<a href="runs/{html.escape(v["key"])}/report.html">run</a>'
             if v.get("run_dir")
@@ -178,6 +218,7 @@ def report_html(summary: dict) -> str:
             f"<td>{_fmt(v.get('similarity'), '.3f')}</td>"
             f"<td>{_fmt(v.get('start_similarity'), '.3f')}</td>"
             f"<td>{int(v.get('calls') or 0)}</td>"
+            f"<td>{_undecided_cell(v)}</td>"
             f"<td>${_fmt(v.get('cost_usd'), '.4f', '0')}</td>"
             f"<td>{_fmt(v.get('seconds'), '.1f')}</td>"
             f"<td>{_fmt(v.get('render_s'), '.1f')} / {_fmt(v.get('judge_s'), '.1f')}</td>"
@@ -197,6 +238,21 @@ def report_html(summary: dict) -> str:
         else "No batch budget."
     )
     mean = t.get("mean_similarity")
+    ref = _data_uri(root / "reference" / "reference.png", 384) if root is not None else None
+    ref_img = f'<img src="{ref}" width="192" height="192" alt="reference"><br>' if ref else ""
+    sheet_img = (
+        f'<details><summary>Contact sheet</summary><img src="{_png_uri(png_bytes(sheet))}" '
+        'style="max-width: 100%" alt="contact sheet"></details>'
+        if sheet is not None
+        else ""
+    )
+    share = float(t.get("undecided_share") or 0.0)
+    undecided_line = (
+        f"{t.get('undecided', 0)} of {t.get('matches', 0)} matches ({100 * share:.0f} %) "
+        "stayed undecided (no usable answer from the model even when asked again)."
+    )
+    if share > UNDECIDED_WARNING:
+        undecided_line = f"<b>Warning:</b> {undecided_line} The rankings rest on less evidence."
     return f"""<!doctype html>
 <html><head><meta charset="utf-8"><title>intuitf batch</title>
 <style>
@@ -208,15 +264,16 @@ img {{ background: #000; }}
 small {{ color: #52525b; }}
 </style></head><body>
 <h1>intuitf batch</h1>
-<p><img src="reference/reference.png" width="192" height="192" alt="reference"><br>
+<p>{ref_img}
 Reference: {html.escape(str(summary.get("reference", "")))}</p>
 <p>{t["volumes"]} volumes: {t["completed"]} completed, {t["flagged"]} flagged (not finished, or
 similarity below {summary["flag_below"]:.2f}), {t["failed"]} failed to load or run.
 Mean similarity of the completed: {_fmt(mean, ".3f")}. {t["calls"]} model calls,
 ${t["cost_usd"]:.4f}. {html.escape(budget_line)}</p>
-<p><a href="contact_sheet.png">Contact sheet</a> · <a href="summary.json">summary.json</a></p>
+<p>{undecided_line}</p>
+{sheet_img}
 <table><tr><th>best</th><th>volume</th><th>status</th><th>similarity</th><th>before search</th>
-<th>calls</th><th>cost</th><th>time (s)</th><th>render / judge (s)</th><th>flag</th><th></th></tr>
+<th>calls</th><th>undecided</th><th>cost</th><th>time (s)</th><th>render / judge (s)</th><th>flag</th><th></th></tr>
 {"".join(rows)}
 </table>
 <p><small>Similarity: colour distribution of the rendered materials against the reference picture
@@ -237,6 +294,7 @@ def summary_table(summary: dict):
     table.add_column("sim", justify="right")
     table.add_column("start", justify="right")
     table.add_column("calls", justify="right")
+    table.add_column("undecided", justify="right")
     table.add_column("$", justify="right")
     table.add_column("time s", justify="right")
     table.add_column("render/judge s", justify="right")
@@ -249,6 +307,7 @@ def summary_table(summary: dict):
             _fmt(v.get("similarity"), ".3f"),
             _fmt(v.get("start_similarity"), ".3f"),
             str(int(v.get("calls") or 0)),
+            _undecided_cell(v),
             _fmt(v.get("cost_usd"), ".4f", "0"),
             _fmt(v.get("seconds"), ".1f"),
             f"{_fmt(v.get('render_s'), '.1f')}/{_fmt(v.get('judge_s'), '.1f')}",

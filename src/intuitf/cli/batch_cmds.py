@@ -394,6 +394,11 @@ def register(app: typer.Typer) -> None:
             f"{t['calls']} model calls, ${t['cost_usd']:.4f}, "
             f"{time.perf_counter() - started:.1f} s.{spent}"
         )
+        if t.get("matches"):
+            console.print(
+                f"{t['undecided']} of {t['matches']} matches "
+                f"({100 * t['undecided_share']:.0f} %) stayed undecided."
+            )
         console.print(
             f"Summary: [bold]{job.root / 'summary.json'}[/]  report: {job.root / 'report.html'}"
         )
