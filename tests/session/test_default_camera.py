@@ -28,20 +28,22 @@ def _recorded_camera(run_dir) -> dict:
 
 
 def test_cli_web_and_python_api_judge_from_the_same_default_camera(tmp_path):
-    expected = default_camera()
-    assert expected != Camera().to_dict()  # a three-quarter view, not straight on
+    spec = RunSpec.model_validate({"volume": {"source": "phantom"}, "settings": SMALL})
+    # The session's choice for this volume (the same volume every front end opens).
+    expected = default_camera(spec.volume.load(), spec)
+    assert expected != Camera().to_dict()  # a chosen view, not straight on
 
     # Python API: a spec with no camera.
-    spec = RunSpec.model_validate({"volume": {"source": "phantom"}, "settings": SMALL})
     with Session.open(spec, tmp_path / "api") as s:
         assert s.camera.to_dict() == expected
     assert _recorded_camera(tmp_path / "api") == expected
 
-    # In-memory objects (Session.create) take the same default.
+    # In-memory objects (Session.create) take the default the same way.
     from intuitf.volume.phantom import phantom
 
-    with Session.create(phantom(32)) as s:
-        assert s.camera.to_dict() == expected
+    vol = phantom(32)
+    with Session.create(vol) as s:
+        assert s.camera.to_dict() == default_camera(vol)
 
     # CLI: optimize with no --azimuth/--elevation.
     cli = tmp_path / "cli"
