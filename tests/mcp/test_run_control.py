@@ -60,3 +60,41 @@ def test_pause_continue_budget_and_cancel(folders, fake_model):
             assert end["info"]["generations_done"] < 50
 
     asyncio.run(main())
+
+
+def test_runs_from_a_reference_picture_and_a_sketch(folders):
+    """Intents with pictures: a reference the agent rendered, a sketch over a rendering (both
+    under the output folder), and a new query with a reference on a finished run."""
+    import numpy as np
+    from PIL import Image
+
+    from intuitf.mcp import build_server
+
+    server, _ = build_server(make_config(folders))
+    small = {**SETTINGS, "population": 4, "generations": 1}
+
+    async def main():
+        async with Client(server) as client:
+            vid = (await call(client, "open_volume", path=folders["foot"].name))["id"]
+            base = (await call(client, "render", volume=vid, size=64))["path"]
+            strokes = np.zeros((64, 64, 4), np.uint8)
+            strokes[20:40, 20:44] = (230, 40, 30, 255)  # "this part red"
+            sketch = folders["out"] / "strokes.png"
+            Image.fromarray(strokes, "RGBA").save(sketch)
+            by_image = await call(client, "start_run", volume=vid, judge="metric", settings=small,
+                                  intent={"kind": "image", "reference": base})  # fmt: skip
+            by_sketch = await call(client, "start_run", volume=vid, judge="metric", settings=small,
+                                   intent={"sketch": str(sketch), "base": base})  # fmt: skip
+            ends = [await wait_run_end(client, r["run"]) for r in (by_image, by_sketch)]
+            asked = await call(client, "new_query", run=by_image["run"], generations=1,
+                               intent={"kind": "image", "reference": base})  # fmt: skip
+            again = await wait_run_end(client, by_image["run"])
+            return ends, asked, again
+
+    ends, asked, again = asyncio.run(main())
+    assert [e["info"]["intent"]["kind"] for e in ends] == ["image", "sketch"]
+    assert all(e["info"]["status"] == "completed" for e in ends)
+    assert asked["applied"] and again["info"]["generations_done"] == 2
+    # The run folders hold copies of the pictures: the agent's files may go away.
+    run_dir = folders["runs"] / ends[1]["run"]
+    assert any(p.suffix == ".png" for p in (run_dir / "intent").iterdir())

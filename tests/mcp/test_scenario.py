@@ -109,6 +109,10 @@ async def scenario(client: Client, folders, model_url: str) -> dict:
     assert v["ranking"].index(ids[2].split("/")[1]) < v["ranking"].index(ids[0].split("/")[1])
     undone = await call(client, "undo_verdict", run=run)
     assert undone["verdict"]["undone"] is True
+    chosen = await call(client, "choose_best", run=run, best=ids[1], among=ids)
+    assert chosen["ranking"][0] == ids[1].split("/")[1]
+    back = await call(client, "undo_verdict", run=run)
+    assert back["ranking"][0] == ids[0].split("/")[1]  # undone: the judge's order again
 
     # -- select a feature where the best candidate shows something -------------------------
     best = ids[0]

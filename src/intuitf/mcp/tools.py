@@ -118,6 +118,10 @@ class Results:
             reply = call()
             if not isinstance(reply, Reply):
                 reply = await reply
+            if reply.pictures:  # encoding a picture takes a while: not on the server's loop
+                import asyncio
+
+                return await asyncio.to_thread(self.result, reply, fmt)
             return self.result(reply, fmt)
         except ToolError as exc:
             raise ToolError(self.scrub(str(exc))) from None
