@@ -399,3 +399,97 @@ def test_view_socket_answers_every_bad_message_and_stays_up(tmp_path):
             logging.getLogger(name).removeHandler(records)
     noise = [m for m in records.messages if "handshake" in m or "Exception in ASGI" in m]
     assert not noise, noise
+
+
+# -- 12: "Explore from here" takes the query panel's settings, and no second initialize ---------
+def test_branch_from_a_candidate_takes_settings_and_skips_initialize(client):
+    name = _start(client, generations=3)
+    d = wait_run(client, name)
+    stages = [g["stage"] for g in client.app.state.web.store.history(name)]
+    assert "initialize" in stages
+    qid = d["gallery"][0]["qid"]
+    cid = qid.split("/")[1]
+    r = client.post(
+        f"/api/runs/{name}/branch",
+        json={
+            "candidate": cid,
+            "changes": {
+                "intent": {"kind": "text", "text": "faint red skin"},
+                "settings": {"population": 8, "generations": 2},
+                "judge": {"spec": "metric"},
+            },
+        },
+    )
+    assert r.status_code == 201, r.text
+    child = r.json()["name"]
+    d = wait_run(client, child)
+    rs = client.app.state.web.run_settings(child)
+    assert rs.population == 8 and rs.generations == 2
+    stages = [g["stage"] for g in client.app.state.web.store.history(child)]
+    assert stages == ["customize", "customize"], stages
+    # Bad settings in a branch are refused before anything is made.
+    before = len(client.get("/api/runs").json())
+    r = client.post(f"/api/runs/{name}/branch",
+                    json={"candidate": cid, "changes": {"settings": {"population": "many"}}})  # fmt: skip
+    assert r.status_code == 422 and r.json()["detail"]
+    assert len(client.get("/api/runs").json()) == before
+
+
+# -- 13: runs renamed and deleted ----------------------------------------------------------------
+def test_runs_can_be_renamed_and_deleted(client):
+    name = _start(client, generations=1)
+    wait_run(client, name)
+    registry = client.app.state.web.registry
+    _wait(lambda: registry.entry(name) is None, what="the run's folder released")
+    r = client.post(f"/api/runs/{name}/rename", json={"title": "  my   bone run "})
+    assert r.status_code == 200, r.text
+    assert client.get(f"/api/runs/{name}").json()["info"]["title"] == "my bone run"
+    assert {r["name"]: r.get("title") for r in client.get("/api/runs").json()}[
+        name
+    ] == "my bone run"
+    tree = client.get("/api/tree").json()
+    assert any(n["run"]["name"] == name and n["run"]["title"] == "my bone run" for n in tree)
+    assert client.post(f"/api/runs/{name}/rename", json={"title": ""}).status_code == 422
+    # A run with branches stays until they go; a going run cannot be deleted.
+    qid = client.get(f"/api/runs/{name}").json()["gallery"][0]["qid"]
+    r = client.post(f"/api/runs/{name}/branch",
+                    json={"candidate": qid.split("/")[1], "changes": {"settings": {"generations": 1}}})  # fmt: skip
+    child = r.json()["name"]
+    assert client.delete(f"/api/runs/{child}").status_code == 409  # still going
+    wait_run(client, child)
+    _wait(lambda: registry.entry(child) is None, what="the branch's folder released")
+    r = client.delete(f"/api/runs/{name}")
+    assert r.status_code == 409 and child in r.json()["detail"]
+    assert client.delete(f"/api/runs/{child}").status_code == 204
+    assert client.delete(f"/api/runs/{name}").status_code == 204
+    names = [r["name"] for r in client.get("/api/runs").json()]
+    assert name not in names and child not in names
+    assert client.get(f"/api/runs/{name}").status_code == 404
+    runs_dir = client.app.state.web.runs_dir
+    assert [p for p in (runs_dir / ".deleted").iterdir() if p.name.startswith(name + "-")]
+
+
+# -- 14: near-duplicates folded in the gallery ---------------------------------------------------
+def test_gallery_folds_near_duplicates():
+    from intuitf.tf import GaussianTF
+    from intuitf.web.routes_runs import fold_gallery
+
+    def tf(mean, height=0.5):
+        return GaussianTF.from_dict({"format": "intuitf.gaussian-tf", "version": 1, "gaussians": [
+            {"mean": mean, "width": 0.05, "height": height, "color": [1, 0.5, 0.2]}]})  # fmt: skip
+
+    tfs = {"a": tf(0.3), "b": tf(0.3005), "c": tf(0.7), "d": tf(0.3, 0.501), "e": tf(0.5)}
+    ratings = {"a": 1600.0, "b": 1590.0, "c": 1500.0, "d": 1400.0, "e": float("nan")}
+    out = fold_gallery("run", ["a", "b", "c", "d", "e"], tfs, ratings)
+    assert [g["id"] for g in out] == ["a", "c", "e"]
+    assert out[0]["similar"] == ["b", "d"] and out[1]["similar"] == []
+    assert [g["rank"] for g in out] == [1, 3, 5] and out[2]["rating"] is None
+
+
+def test_history_thumbnails_point_at_pictures_that_exist(client):
+    name = _start(client, generations=1)
+    wait_run(client, name)
+    for node in client.get("/api/tree").json():
+        for g in node["generations"]:
+            if g["thumbnail"]:
+                assert client.get(g["thumbnail"]).status_code == 200

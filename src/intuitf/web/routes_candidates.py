@@ -4,6 +4,7 @@ exports."""
 from __future__ import annotations
 
 import asyncio
+import json
 from dataclasses import replace
 from typing import Any, Literal
 
@@ -210,6 +211,9 @@ async def export(
     cid: str,
     to: Literal["paraview", "slicer", "vtk", "1dt", "json", "png"] = "json",
     size: int = Query(512, ge=16, le=2048),
+    camera: str | None = Query(
+        None, max_length=2000, description="PNG only: the view's camera as JSON (default: judging)"
+    ),
 ) -> Response:
     """The candidate's TF as a download for another tool (in the data's own units)."""
     from intuitf.render import Camera
@@ -228,10 +232,18 @@ async def export(
     if to == "png":
         rs = await asyncio.to_thread(web.run_settings, run)
         volume = await asyncio.to_thread(web.volume_of_run, run)
-        camera = Camera.from_dict(rs.camera) if rs.camera else Camera()
+        if camera is not None:
+            try:
+                view_camera = camera_of(json.loads(camera))
+            except ValueError:
+                raise ApiError(
+                    422, "camera must be a JSON object.", "Send {azimuth, ...}."
+                ) from None
+        else:
+            view_camera = Camera.from_dict(rs.camera) if rs.camera else Camera()
         vr = web.view_renderer(volume, tuple(rs.background))
         image = await render_scheduler().run(
-            lambda: vr.view(info.tf, camera, size, rs.shading), INTERACTIVE
+            lambda: vr.view(info.tf, view_camera, size, rs.shading), INTERACTIVE
         )
         data, filename = await asyncio.to_thread(encode_png, image), f"{stem}.png"
     elif to == "json":

@@ -8,7 +8,7 @@ import asyncio
 from typing import Any, Literal
 
 from fastapi import APIRouter, Header, Query, Request
-from fastapi.responses import FileResponse, StreamingResponse
+from fastapi.responses import FileResponse, Response, StreamingResponse
 from pydantic import BaseModel, ConfigDict, Field
 
 from intuitf.errors import IntuitfError
@@ -106,6 +106,10 @@ class WorstIn(_In):
 
 class UndoIn(_In):
     id: int | None = None
+
+
+class RenameIn(_In):
+    title: str = Field(..., min_length=1, max_length=100, description="the run's shown name")
 
 
 class StatusOut(BaseModel):
@@ -325,6 +329,47 @@ async def _start(web, session: LiveSession) -> str:
     return session.name
 
 
+#: Mean absolute difference of two TFs' RGBA lookup tables below which the gallery folds them.
+SIMILAR_LUT = 0.01
+GALLERY = 8
+
+
+def fold_gallery(name: str, ranking, tfs, ratings, k: int = GALLERY) -> list[dict]:
+    """The top ``k`` results of a ranking, each near-duplicate (a TF whose lookup table is
+    almost the same as a better one's) folded into the better one's ``similar`` list."""
+    import numpy as np
+
+    from intuitf.tf import GaussianTF
+
+    out: list[dict] = []
+    luts: list[np.ndarray] = []
+    for rank, cid in enumerate(ranking, start=1):
+        tf = tfs.get(cid)
+        if tf is None:
+            continue
+        try:
+            tf = tf if isinstance(tf, GaussianTF) else GaussianTF.from_dict(tf)
+            lut = tf.lut(128)
+        except (IntuitfError, TypeError, ValueError, KeyError):
+            continue
+        twin = next((i for i, other in enumerate(luts)
+                     if float(np.abs(lut - other).mean()) < SIMILAR_LUT), None)  # fmt: skip
+        if twin is not None:
+            out[twin]["similar"].append(cid)
+            continue
+        if len(out) >= k:
+            continue  # only folds into the shown ones from here on
+        luts.append(lut)
+        rating = ratings.get(cid)
+        if rating is not None and not np.isfinite(float(rating)):
+            rating = None
+        out.append({"id": cid, "qid": f"{name}/{cid}", "rank": rank, "similar": [],
+                    "rating": None if rating is None else float(rating)})  # fmt: skip
+        if len(out) >= k and rank > 4 * k:
+            break
+    return out
+
+
 def _gallery_from_checkpoint(web, name: str) -> list[dict]:
     from intuitf.session import RunDirectory
 
@@ -342,16 +387,7 @@ def _gallery_from_checkpoint(web, name: str) -> list[dict]:
         ranking = [c["id"] for c in cands]
         ratings = {c["id"]: c.get("rating") for c in cands}
         tfs = {c["id"]: c.get("tf") for c in cands}
-    out, seen = [], set()
-    for rank, cid in enumerate(ranking, start=1):
-        key = repr(tfs.get(cid))
-        if key in seen:
-            continue
-        seen.add(key)
-        out.append({"id": cid, "qid": f"{name}/{cid}", "rating": ratings.get(cid), "rank": rank})
-        if len(out) >= 8:
-            break
-    return out
+    return fold_gallery(name, ranking, tfs, ratings)
 
 
 def _thumbnail_url(name: str, g: int) -> str:
@@ -364,7 +400,29 @@ INTERRUPTED = (
 )
 
 
+#: The page's own notes on a run (its shown title), beside the run's files.
+WEB_NOTES = "web.json"
+#: Where deleted runs are moved (hidden: the run list shows only folders with a run.json).
+TRASH = ".deleted"
+
+
+def _title(web, name: str) -> str | None:
+    import json
+
+    try:
+        notes = json.loads((web.store.path_of(name) / WEB_NOTES).read_text(encoding="utf-8"))
+        title = notes.get("title")
+        return str(title) if title else None
+    except (OSError, ValueError, IntuitfError, AttributeError):
+        return None
+
+
 def status_now(web, info: dict[str, Any]) -> dict[str, Any]:
+    info = {**info, "title": _title(web, info["name"])}
+    return _status_now(web, info)
+
+
+def _status_now(web, info: dict[str, Any]) -> dict[str, Any]:
     """A run's listing as a person should read it now.
 
     A run that has ended but still writes its best pictures and exports holds its folder's
@@ -448,6 +506,51 @@ def _discard(run_dir) -> None:
         shutil.rmtree(run_dir, ignore_errors=True)
 
 
+@router.post("/runs/{name}/rename", response_model=NameOut)
+def rename_run(request: Request, name: str, body: RenameIn) -> dict:
+    """Give a run the title the page shows (its folder and id stay, so branches and
+    addresses that name it keep working)."""
+    import json
+
+    web = state(request)
+    run_dir = _run_dir(web, name)
+    title = " ".join(body.title.split())
+    if not title:
+        raise ApiError(422, "A title needs some text.")
+    (run_dir / WEB_NOTES).write_text(json.dumps({"title": title}), encoding="utf-8")
+    return {"name": name}
+
+
+@router.delete("/runs/{name}", status_code=204, response_class=Response)
+async def delete_run(request: Request, name: str) -> Response:
+    """Delete a run that is not going and has no branches: its folder is moved aside (into
+    the runs folder's hidden .deleted/), so nothing shows it and nothing is lost by a slip."""
+    import shutil
+    import time
+
+    web = state(request)
+    run_dir = _run_dir(web, name)
+    if web.registry.entry(name) is not None:
+        raise ApiError(409, f"The run {name!r} is going.", "Stop it first.")
+    await web.registry.wait_released(name)
+    info = await asyncio.to_thread(web.store.run, name)
+    if info.status == "running":
+        raise ApiError(409, f"The run {name!r} is in use by another process.")
+    children = [r.name for r in await asyncio.to_thread(web.store.runs)
+                if (r.parent or {}).get("run") == name]  # fmt: skip
+    if children:
+        raise ApiError(
+            409,
+            f"Runs branch from {name!r} ({', '.join(children[:5])}).",
+            "Delete its branches first.",
+        )
+    trash = web.runs_dir / TRASH
+    trash.mkdir(exist_ok=True)
+    await asyncio.to_thread(shutil.move, str(run_dir), str(trash / f"{name}-{int(time.time())}"))
+    web.candidates.clear()
+    return Response(status_code=204)
+
+
 @router.get("/tree")
 def tree(request: Request) -> list[dict[str, Any]]:
     web = state(request)
@@ -480,13 +583,11 @@ async def run_detail(request: Request, name: str) -> dict[str, Any]:
     if live is not None:
         s = live.session
         try:
-            best = await live.call(lambda: s.best_candidates(8))
+            ranking, tfs, ratings = await live.call(
+                lambda: (list(s.last_ranking), dict(s.tfs), dict(s.ratings))
+            )
             snap = s.snapshot()
-            rank = {cid: i + 1 for i, cid in enumerate(snap.ranking)}
-            gallery = [
-                {"id": cid, "qid": f"{name}/{cid}", "rating": r, "rank": rank.get(cid)}
-                for cid, _tf, r in best
-            ]
+            gallery = await asyncio.to_thread(fold_gallery, name, ranking, tfs, ratings)
             return {
                 **where,
                 "info": info_d,
@@ -666,11 +767,39 @@ async def branch(request: Request, name: str, body: BranchIn) -> dict:
         changes["intent"] = await asyncio.to_thread(
             resolve_intent, web, intent_in, camera, rs.image_size, rs.shading, tuple(rs.background)
         )
+    if "settings" in changes:
+        if not isinstance(changes["settings"], dict):
+            raise ApiError(422, "The settings of a branch are a JSON object.")
+        parent_settings = (await asyncio.to_thread(web.record, name)).get("settings") or {}
+        check_settings({**parent_settings, **changes["settings"]})
+    if cid is not None:
+        changes = await asyncio.to_thread(_no_second_initialize, web, name, changes)
     web.registry.check_capacity()
     return {
         "name": await _branch(
             web, name, parent_dir, f"{name}-branch", body.generation, cid, changes
         )
+    }
+
+
+def _no_second_initialize(web, name: str, changes: dict[str, Any]) -> dict[str, Any]:
+    """A branch from a candidate of a run that has found its structures (it ran its
+    initialize stage) goes straight to its query: no second initialize stage."""
+    record = web.record(name)
+    settings = {**(record.get("settings") or {}), **(changes.get("settings") or {})}
+    if settings.get("stages") and "stages" in (changes.get("settings") or {}):
+        return changes  # a plan asked for explicitly
+    intent = changes.get("intent", ((record.get("spec") or {}).get("intent") or {}))
+    kind = intent.get("kind", "text") if isinstance(intent, dict) else "text"
+    if kind in (None, "none", "edit"):
+        return changes
+    done = [g.get("stage") for g in web.store.history(name)]
+    if "initialize" not in done:
+        return changes
+    n = int(settings.get("generations") or 4)
+    return {
+        **changes,
+        "settings": {**(changes.get("settings") or {}), "stages": [["customize", n]]},
     }
 
 

@@ -235,9 +235,9 @@ function handleEvent(name, ev) {
       if (fresh) {
         const kind = d.reason === "completed" ? "ok" : d.reason === "cancelled" ? "info" : "error";
         const hints = {
-          judge: "The model server failed. Check it, then press Continue: paid verdicts are kept.",
-          budget: "Raise the budget in the query panel, then press Continue.",
-          storage: "Free disk space, then press Continue.",
+          judge: "The model server failed. Check it, then press Resume run: paid verdicts are kept.",
+          budget: "Raise the budget in the query panel, then press Resume run.",
+          storage: "Free disk space, then press Resume run.",
         };
         showMessage(`${name}: ${d.message || d.reason}`, { kind, hint: hints[d.reason] || "" });
       }

@@ -7,7 +7,7 @@ import { initGallery } from "./gallery.js";
 import { initHistory } from "./history.js";
 import { showError, showMessage } from "./messages.js";
 import { initQuery } from "./query.js";
-import { el, fmtSeconds, fmtUsd, generationOf, on, set, setErrorSink, splitQid, state } from "./state.js";
+import { cameraJSON, el, fmtSeconds, fmtUsd, generationOf, on, set, setErrorSink, splitQid, state } from "./state.js";
 import { initTfEditor } from "./tf_editor.js";
 import { initVolumeView } from "./volume_view.js";
 
@@ -17,7 +17,8 @@ const EXPORTS = [
   ["vtk", "VTK (.py/.json)"],
   ["1dt", "ImageVis3D (.1dt)"],
   ["json", "intuitf TF (.json)"],
-  ["png", "Rendering (.png)"],
+  ["png", "Rendering, this view (.png)"],
+  ["png-judging", "Rendering, the run's judging view (.png)"],
 ];
 
 async function boot() {
@@ -232,13 +233,30 @@ function renderProgress() {
 // -- export ------------------------------------------------------------------------------------------
 function initExport() {
   const menu = document.getElementById("export-list");
+  const details = document.getElementById("export-menu");
+  // The PNG of "this view" is taken from the camera on screen when the item is clicked.
+  const urlOf = (qid, to) =>
+    to === "png"
+      ? `${api.exportUrl(qid, "png")}&camera=${encodeURIComponent(JSON.stringify(cameraJSON()))}`
+      : api.exportUrl(qid, to === "png-judging" ? "png" : to);
   const render = () => {
     const qid = state.current;
-    document.getElementById("export-menu").classList.toggle("disabled", !qid);
+    details.classList.toggle("disabled", !qid);
     menu.replaceChildren(
       ...EXPORTS.map(([to, label]) =>
         qid
-          ? el("a.menu-item", { href: api.exportUrl(qid, to), download: "", "data-to": to, text: label })
+          ? el("a.menu-item", {
+              href: urlOf(qid, to),
+              download: "",
+              "data-to": to,
+              text: label,
+              on: {
+                click: (e) => {
+                  e.currentTarget.href = urlOf(qid, to);
+                  setTimeout(() => (details.open = false), 0); // the menu closes once chosen
+                },
+              },
+            })
           : el("span.menu-item.disabled", { text: label }),
       ),
     );

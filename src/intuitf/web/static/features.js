@@ -132,5 +132,5 @@ function markSelection() {
   clearBtn.disabled = !n;
   note.textContent = n
     ? `${n} selected: a query refines only ${n === 1 ? "this feature" : "these features"}`
-    : "click a feature (here or in the view) to refine only it";
+    : "click a feature here (or in the view; Ctrl/⌘-click there adds more) to refine only it";
 }

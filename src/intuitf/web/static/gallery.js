@@ -94,7 +94,7 @@ function card(item) {
         title: `Show ${item.qid}`,
         on: { click: () => setCurrent(item.qid, { follow: false }) },
       },
-      el("img", { src: api.candidateImageUrl(item.qid, 192), alt: item.id, width: "192", height: "192" }),
+      pendingImage(api.candidateImageUrl(item.qid, 192), item.id),
       markIdx >= 0 ? el("span.mark-tag", { text: "AB"[markIdx] || String(markIdx + 1) }) : null,
     ),
     el(
@@ -103,9 +103,27 @@ function card(item) {
       el("span.rank", { text: `#${item.rank}` }),
       el("span.rating", { title: "rating", text: fmtRating(item.rating) }),
       el("span.cid", { text: item.id }),
+      (item.similar || []).length
+        ? el("span.dup-count", { title: `Near-duplicates folded here: ${item.similar.join(", ")}`, "data-testid": "similar", text: `+${item.similar.length} similar` })
+        : null,
       el("label.mark-label", {}, mark),
     ),
   );
+}
+
+/** A result's picture that looks pending (striped, "rendering…") until it has loaded: a
+ * picture being rendered is not mistaken for an empty, black result. */
+function pendingImage(src, alt) {
+  const note = el("span.pending-note", { text: "rendering…" });
+  const img = el("img.loading", { src, alt, width: "192", height: "192" });
+  const done = () => {
+    img.classList.remove("loading");
+    note.remove();
+  };
+  img.addEventListener("load", done);
+  img.addEventListener("error", () => (note.textContent = "no picture"));
+  if (img.complete && img.naturalWidth) done();
+  return [img, note];
 }
 
 function toggleMark(qid) {
@@ -140,7 +158,7 @@ function renderBar() {
       active.length ? `Undo (${active.length})` : "Undo",
       "Take back your last verdict",
       undo,
-      Boolean(state.run),
+      Boolean(state.run) && active.length > 0,
       "undo",
     ),
   );

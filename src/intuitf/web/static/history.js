@@ -5,7 +5,8 @@
 // makes its best current; "Explore from here" starts a branch from the current candidate.
 
 import * as api from "./api.js";
-import { findNode, refreshTree, rootOf, selectRun, setCurrent } from "./actions.js";
+import { findNode, previewVolume, refreshTree, rootOf, selectRun, setCurrent } from "./actions.js";
+import { branchChanges } from "./query.js";
 import { showError, showMessage } from "./messages.js";
 import { el, fmtRating, fmtUsd, generationOf, on, splitQid, state } from "./state.js";
 
@@ -50,7 +51,7 @@ function render() {
           on: { click: () => selectRun(latestIn(r), { follow: false }) },
         },
         el(`span.dot.status-${r.run.status}`),
-        r.run.name,
+        r.run.title || r.run.name,
       ),
     ),
   );
@@ -128,12 +129,20 @@ function renderRun(node, depth) {
       on: { click: () => selectRun(info.name, { follow: info.status === "running" }) },
     },
     el(`span.dot.status-${info.status}`),
-    el("span.run-name", { text: info.name }),
+    el("span.run-name", { text: info.title || info.name, title: info.title ? `${info.title} (${info.name})` : info.name }),
     info.status !== "completed" ? el(`span.badge.status-${info.status}`, { text: info.status }) : null,
     el("span.run-intent", { text: intentText(info.intent) }),
     el("span.run-meta", {
       text: `${info.generations_done}/${info.generations || "?"} gen · ${fmtUsd((info.cost || {}).usd || 0)}`,
     }),
+    isCurrentRun
+      ? el(
+          "span.run-tools",
+          {},
+          el("button.btn.tiny", { type: "button", title: "Rename this run", "data-testid": "rename-run", on: { click: (e) => (e.stopPropagation(), renameRun(info)) } }, "Rename"),
+          el("button.btn.tiny.danger", { type: "button", title: "Delete this run", "data-testid": "delete-run", disabled: info.status === "running", on: { click: (e) => (e.stopPropagation(), deleteRun(info)) } }, "Delete"),
+        )
+      : null,
   );
 
   const list = el("ol.gens");
@@ -155,13 +164,17 @@ function renderRun(node, depth) {
           "aria-label": `generation ${g.generation} of ${info.name}`,
           on: { click: () => g.qid && setCurrent(g.qid, { follow: false }) },
         },
-        el("img.thumb", {
-          src: api.thumbnailUrl(info.name, g.generation, g.best),
-          alt: `best of generation ${g.generation}`,
-          loading: "lazy",
-          width: "44",
-          height: "44",
-        }),
+        // The generation's saved picture once written; before that (and for a hand edit,
+        // which has none) the candidate rendered on demand: never a request that 404s.
+        g.qid || g.thumbnail
+          ? el("img.thumb", {
+              src: g.thumbnail || api.candidateImageUrl(g.qid, 64),
+              alt: `best of generation ${g.generation}`,
+              loading: "lazy",
+              width: "44",
+              height: "44",
+            })
+          : el("span.thumb.pending", { title: "picture not ready yet" }),
         el(
           "span.gen-meta",
           {},
@@ -192,6 +205,29 @@ function renderRun(node, depth) {
   );
 }
 
+async function renameRun(info) {
+  const title = window.prompt(`A new name for ${info.title || info.name}:`, info.title || info.name);
+  if (!title || !title.trim()) return;
+  try {
+    await api.post(`/api/runs/${api.enc(info.name)}/rename`, { title: title.trim() });
+    await refreshTree();
+  } catch (err) {
+    showError(err);
+  }
+}
+
+async function deleteRun(info) {
+  if (!window.confirm(`Delete the run ${info.title || info.name}? Its files are moved aside (to .deleted in the runs folder).`)) return;
+  try {
+    await api.request("DELETE", `/api/runs/${api.enc(info.name)}`);
+    await refreshTree();
+    previewVolume(state.volumeId);
+    showMessage(`Deleted ${info.title || info.name}.`, { kind: "ok" });
+  } catch (err) {
+    showError(err);
+  }
+}
+
 function matchNote(stats) {
   if (!stats || !stats.undecided) return null;
   return el("span.gen-warn", { title: `${stats.undecided} matches undecided`, text: `${stats.undecided}?` });
@@ -201,11 +237,11 @@ function matchNote(stats) {
 async function exploreFromHere() {
   const cur = splitQid(state.current);
   if (!cur) return;
-  const text = (document.getElementById("q-text") || {}).value || "";
   const body = { candidate: cur.cid };
-  if (text.trim()) body.changes = { intent: { kind: "text", text: text.trim() } };
   branchBtn.disabled = true;
   try {
+    const changes = await branchChanges();
+    if (Object.keys(changes).length) body.changes = changes;
     const res = await api.post(`/api/runs/${api.enc(cur.run)}/branch`, body);
     await refreshTree();
     await selectRun(res.name, { follow: true });

@@ -284,6 +284,19 @@ async function intentFromPanel(text, { firstStage = false } = {}) {
 
 class UserError extends Error {}
 
+/** What "Explore from here" takes from this panel: the query (text, picture or sketch; none
+ * when the panel is empty), the settings typed in and the evaluator. */
+export async function branchChanges() {
+  const text = $("q-text").value.trim();
+  const changes = {};
+  const empty = kind === "text" ? !text : kind === "image" ? !reference : !strokes.length;
+  if (!empty) changes.intent = await intentFromPanel(text);
+  const s = settings();
+  if (Object.keys(s).length) changes.settings = s;
+  if ($("q-evaluator").dataset.touched && $("q-evaluator").value.trim()) changes.judge = judgeSpec();
+  return changes;
+}
+
 function judgeSpec() {
   const judge = { spec: $("q-evaluator").value.trim() || "metric" };
   const usd = num("q-budget-usd");
