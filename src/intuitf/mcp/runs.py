@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import threading
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 from intuitf.errors import IntuitfError, SessionError
@@ -51,11 +52,13 @@ class RunDesk:
     # -- lookups --------------------------------------------------------------------------
     def check_run(self, name: Any) -> str:
         """``name`` if it is a run under ``--runs`` (SessionError otherwise)."""
+        from intuitf.session import RunDirectory
+
         if not isinstance(name, str):
             raise SessionError("A run is named by its name (a string), as start_run returns it.")
         path = self.store.path_of(name)
         self.svc.roots.run_folder(path)
-        if not (path / "run.json").is_file():
+        if not RunDirectory(path).run_json.is_file():
             raise SessionError(
                 f"There is no run {name[:80]!r} in {self.store.root}.",
                 "Use a name from list_runs (or the one start_run returned).",
@@ -407,9 +410,7 @@ class RunDesk:
         images, out = [], []
         for item in items:
             tf = (await asyncio.to_thread(self.store.candidate, item["id"])).tf
-            img = await render_scheduler().run(
-                lambda tf=tf: vr.view(tf, cam, size, shaded), INTERACTIVE
-            )
+            img = await render_scheduler().run(partial(vr.view, tf, cam, size, shaded), INTERACTIVE)
             images.append(img)
             path = await asyncio.to_thread(
                 self.svc.save_picture, img, item["id"].replace("/", "-"), cam, vol, shaded, bg

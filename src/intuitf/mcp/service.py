@@ -418,7 +418,7 @@ def check_background(value: Any, settings: dict) -> tuple[float, float, float]:
         raise RenderError(
             f"A background is three numbers in [0, 1] (red, green, blue), got {value!r}."
         )
-    return bg  # type: ignore[return-value]
+    return (bg[0], bg[1], bg[2])
 
 
 __all__ = ["IntuitfError", "McpConfig", "McpService", "Picture", "Reply"]
