@@ -243,6 +243,11 @@ def browser_part(base: str, token: str, args, chromium: str, hist: dict) -> dict
         page.wait_for_selector("body.ready")
         out["gpu"] = page.evaluate("window.intuitfDebug.gl.renderer()?.gpu || 'no WebGL2'")
         # First picture after choosing the volume (the page's own clock, from the choice).
+        # Long main-thread tasks meanwhile show whether loading froze the page.
+        page.evaluate(
+            "() => { window.__long = []; new PerformanceObserver(l => l.getEntries()"
+            ".forEach(e => window.__long.push(e.duration))).observe({entryTypes: ['longtask']}); }"
+        )
         t = time.perf_counter()
         page.select_option("#volume-select", args.volume)
         page.wait_for_function(
@@ -250,6 +255,7 @@ def browser_part(base: str, token: str, args, chromium: str, hist: dict) -> dict
         )
         out["first picture wall"] = (time.perf_counter() - t) * 1000.0
         stats = page.evaluate("window.intuitfDebug.gl.stats")
+        out["long tasks"] = page.evaluate("window.__long")
         out["first picture"] = stats["firstPicture"][args.volume]
         out["load"] = stats["loadMs"][args.volume]
         out["tf"] = page.evaluate("import('/static/state.js').then(S => S.shownTF())")
@@ -353,6 +359,10 @@ def report(args, res: dict, load_before, load_after) -> None:
     row("server still 256² shaded (render_ms)", res["server 256"])
     row("server still 512² shaded (render_ms)", res["server 512"], 500)
     print()
+    longs = sorted(res["long tasks"], reverse=True)
+    print(f"main-thread tasks over 50 ms from choosing the volume to its first picture: "
+          f"{len(longs)}, longest {', '.join(f'{v:.0f}' for v in longs[:3]) or '–'} ms "
+          f"(the first draw is one of them)")  # fmt: skip
     if res["drag note"]:
         print(f"on screen while dragging: {res['drag note']!r}")
     print(f"pick: {res['pick info']!r}")

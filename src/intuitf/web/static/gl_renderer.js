@@ -190,6 +190,7 @@ export class GLVolumeRenderer {
     gl.bindTexture(gl.TEXTURE_2D, this.lutTex);
     gl.uniform1i(u.u_lut, 2);
     gl.uniform3f(u.u_dims, vol.dims[0], vol.dims[1], vol.dims[2]);
+    gl.uniform3f(u.u_invDims, 1 / vol.dims[0], 1 / vol.dims[1], 1 / vol.dims[2]);
     gl.uniform3i(u.u_nb, this.blocks.nb[0], this.blocks.nb[1], this.blocks.nb[2]);
     gl.uniform3f(u.u_is, this.invSpacing[0], this.invSpacing[1], this.invSpacing[2]);
     gl.uniform2f(u.u_map, vol.map[0], vol.map[1]);

@@ -25,6 +25,7 @@ uniform sampler3D u_vol;   // R8 (original bytes) or R16F (normalised values), l
 uniform sampler3D u_vis;   // R8 per block: visible (1) or skipped (0), nearest
 uniform sampler2D u_lut;   // RGBA32F (L × 1), straight colour, linear filter
 uniform vec3 u_dims;       // nx, ny, nz
+uniform vec3 u_invDims;    // 1 / (nx, ny, nz)
 uniform ivec3 u_nb;        // blocks per axis
 uniform vec3 u_is;         // 1 / spacing (spacing in units of the smallest)
 uniform vec2 u_map;        // normalised = texel * u_map.x + u_map.y
@@ -41,9 +42,10 @@ uniform int u_persp;
 
 const int BSIZE = 8;
 
+// textureLod, not texture: no implicit derivatives to work out (software rasterisers do).
 float value(vec3 p) {
   vec3 c = clamp(p, vec3(0.0), u_dims - 1.0);
-  return texture(u_vol, (c + 0.5) / u_dims).r * u_map.x + u_map.y;
+  return textureLod(u_vol, (c + 0.5) * u_invDims, 0.0).r * u_map.x + u_map.y;
 }
 
 vec4 lutAt(int q) {
@@ -52,7 +54,7 @@ vec4 lutAt(int q) {
 
 // Entry x (a fractional index) interpolated between its neighbours by the texture's filter.
 vec4 lutLerp(float x) {
-  return texture(u_lut, vec2((x + 0.5) / float(u_nl), 0.5));
+  return textureLod(u_lut, vec2((x + 0.5) / float(u_nl), 0.5), 0.0);
 }
 
 vec2 slab(float o, float d, float hi, vec2 t) {

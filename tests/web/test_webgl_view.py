@@ -1,0 +1,148 @@
+"""The volume view rendered by the page (WebGL2, in headless Chromium's software rasteriser):
+frames while dragging, the pick and its outline, the features strip, and the fallbacks that
+say so (no WebGL2: the server's frames; a volume over the page's limits: downsampled)."""
+
+from __future__ import annotations
+
+import pytest
+
+from helpers.browser import CHROMIUM, CHROMIUM_ARGS, skip_reason, start_server, stop_server
+from helpers.data import DATA, data_dir
+
+pytestmark = pytest.mark.slow
+
+NEGHIP = "neghip_64x64x64_uint8.raw.gz"
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    reason = skip_reason()
+    if reason:
+        pytest.skip(reason)
+    root = tmp_path_factory.mktemp("glview")
+    srv = start_server(root)
+    if data_dir() is not None and (DATA / NEGHIP).exists():
+        (root / "data" / NEGHIP).symlink_to(DATA / NEGHIP)
+    yield srv
+    stop_server(srv)
+
+
+@pytest.fixture(scope="module")
+def chromium():
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        yield pw.chromium
+
+
+def open_page(chromium, server, extra_args=()):
+    b = chromium.launch(
+        executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS + list(extra_args)
+    )
+    page = b.new_page(viewport={"width": 1440, "height": 900})
+    page.set_default_timeout(90_000)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(server.url)
+    page.wait_for_selector("body.ready")
+    return b, page, errors
+
+
+def wait_page_frame(page, quality="full", after=0):
+    page.wait_for_function(
+        "([q, n]) => { const c = document.getElementById('view-canvas');"
+        " return c.dataset.renderer === 'webgl2' && c.dataset.quality === q"
+        " && Number(c.dataset.frames || 0) > n; }",
+        arg=[quality, after],
+    )
+    return int(page.get_attribute("#view-canvas", "data-frames"))
+
+
+def test_the_page_renders_drags_picks_and_draws_the_features(chromium, server):
+    b, page, errors = open_page(chromium, server)
+    try:
+        n = wait_page_frame(page)
+        assert "WebGL2" in page.inner_text("#view-stats")
+        # The picture is the phantom, not an empty canvas.
+        lit = page.evaluate(
+            "() => { const c = document.getElementById('view-canvas');"
+            " const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;"
+            " let k = 0; for (let i = 0; i < d.length; i += 4) if (d[i] + d[i+1] + d[i+2] > 60) k++;"
+            " return k / (c.width * c.height); }"
+        )
+        assert lit > 0.05
+        # A drag turns the camera with frames drawn by the page; the release brings a full one.
+        box = page.locator("#view-canvas").bounding_box()
+        cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+        page.mouse.move(cx, cy)
+        page.mouse.down()
+        for k in range(1, 8):
+            page.mouse.move(cx + 10 * k, cy + 3 * k)
+            page.wait_for_timeout(30)
+        wait_page_frame(page, "drag", n)
+        page.mouse.up()
+        n = wait_page_frame(page, "full", n)
+        assert abs(page.evaluate("window.intuitfDebug.state.camera.azimuth")) > 5
+        # The features strip is drawn by the page (pictures made here, not fetched).
+        page.wait_for_selector("#features-strip .feature img")
+        srcs = page.eval_on_selector_all(
+            "#features-strip .feature img", "ims => ims.map(i => i.src)"
+        )
+        assert srcs and all(s.startswith("data:image/png") for s in srcs)
+        # A click picks by the smallest-area rule from the page's attribution pass and outlines it.
+        page.wait_for_function("() => window.intuitfDebug.gl.stats.prepared !== undefined")
+        page.mouse.click(cx, cy)
+        page.wait_for_function("() => document.getElementById('pick-info').textContent !== ''")
+        if page.inner_text("#pick-info").startswith("Selected feature"):
+            page.wait_for_function(
+                "() => Number(document.getElementById('mask-canvas').dataset.pixels || 0) > 0"
+            )
+            sel = page.evaluate("[...window.intuitfDebug.state.selected]")
+            assert page.get_attribute("#mask-canvas", "data-index") == ",".join(map(str, sel))
+            assert page.evaluate("window.intuitfDebug.gl.stats.clickToOutlineMs") is not None
+        # A hand edit redraws at once: a lower height changes the picture.
+        before = page.evaluate("window.intuitfDebug.gl.stats.frames")
+        page.evaluate(
+            "import('/static/state.js').then(S => { const tf = JSON.parse(JSON.stringify(S.shownTF()));"
+            " tf.gaussians.forEach(g => g.height *= 0.2); S.set({draft: tf}); })"
+        )
+        page.wait_for_function("n => window.intuitfDebug.gl.stats.frames > n", arg=before)
+        assert not errors, errors
+    finally:
+        b.close()
+
+
+def test_without_webgl2_the_server_renders_the_view_and_says_why(chromium, server):
+    b, page, errors = open_page(chromium, server, ["--disable-webgl", "--disable-webgl2"])
+    try:
+        page.wait_for_function(
+            "() => { const c = document.getElementById('view-canvas');"
+            " return c.dataset.quality === 'full' && Number(c.dataset.frames || 0) > 0; }"
+        )
+        assert page.get_attribute("#view-canvas", "data-renderer") is None
+        assert "WebGL2" in page.inner_text("#view-note")
+        assert "server" in page.inner_text("#view-note")
+        assert not errors, errors
+    finally:
+        b.close()
+
+
+def test_a_volume_over_the_page_limits_is_downsampled_with_a_note(chromium, server):
+    if data_dir() is None or not (DATA / NEGHIP).exists():
+        pytest.skip(f"{NEGHIP} is not in {DATA}")
+    b, page, errors = open_page(chromium, server)
+    try:
+        wait_page_frame(page)
+        # A page whose memory allows 100 kB of texture: the 64³ volume comes at every 2nd voxel.
+        page.evaluate(
+            "() => { window.intuitfDebug.gl.renderer().limits = () => ({maxBytes: 100000, maxSide: 2048}); }"
+        )
+        page.select_option("#volume-select", "neghip")
+        page.wait_for_function(
+            "() => window.intuitfDebug.gl.stats.firstPicture.neghip !== undefined"
+        )
+        note = page.inner_text("#view-note")
+        assert "Downsampled 2×" in note and "32×32×32" in note and "64×64×64" in note
+        assert not errors, errors
+    finally:
+        b.close()
