@@ -53,3 +53,13 @@ def test_batch_names_bad_options_by_their_flags(tmp_path, capsys):
                  capsys)  # fmt: skip
     assert "--population" in msg
     assert not (tmp_path / "b").exists()
+
+
+def test_batch_help_shows_the_ray_and_failure_options(capsys):
+    try:
+        main(["batch", "--help"])
+    except SystemExit as exc:
+        assert exc.code in (0, None)
+    text = " ".join(capsys.readouterr().out.split())
+    for flag in ("--ray", "[ADDRESS]", "--ray-timeout", "--max-failures"):
+        assert flag in text

@@ -78,6 +78,8 @@ class EventLog:
         self._lock = threading.RLock()
         self._events: list[RunEvent] = list(read_events(self.path)) if self.path else []
         self._subscribers: list[Subscriber] = []
+        #: The last event before this process took the run (earlier processes' events).
+        self.opened_seq = self.last_seq
 
     @property
     def last_seq(self) -> int:
@@ -106,13 +108,17 @@ class EventLog:
             return [e for e in self._events if e.seq > seq]
 
     def subscribe(self, fn: Subscriber, since: int | None = None) -> Callable[[], None]:
-        """Call ``fn`` for every new event (first replaying those after ``since``, if given).
+        """Call ``fn`` for every new event, first replaying those after ``since``.
 
+        Without ``since``, the replay holds the events this process emitted before the
+        subscriber came (those of opening the run, such as its first ``stage_started``), so
+        a subscriber that attaches after :meth:`Session.open` misses nothing of this
+        session; ``since=0`` replays the run's whole history, earlier processes' included.
         Returns a function that unsubscribes. Replay and subscription happen under one lock,
         so no event is missed or seen twice.
         """
         with self._lock:
-            backlog = self.since(since) if since is not None else []
+            backlog = self.since(self.opened_seq if since is None else since)
             self._subscribers.append(fn)
         for e in backlog:
             fn(e)
