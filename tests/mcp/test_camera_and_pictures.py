@@ -104,3 +104,24 @@ def test_image_tokens_follow_the_published_rule():
     assert image_tokens(768, 768) == 787
     # Larger pictures are scaled down by the model first: cost stops growing.
     assert image_tokens(4000, 4000) == image_tokens(2000, 2000) < 1600
+
+
+def test_pictures_sent_are_scaled_to_the_servers_side_files_keep_full_size(folders):
+    import asyncio
+
+    from mcp_util import call, make_config
+
+    from intuitf.mcp import build_server
+    from mcp import Client
+
+    server, _ = build_server(make_config(folders, picture_side=128))
+
+    async def main():
+        async with Client(server) as client:
+            vid = (await call(client, "open_volume", path="phantom", max_dim=32))["id"]
+            return await call(client, "render", volume=vid, size=300)
+
+    got = asyncio.run(main())
+    assert (got["image"]["width"], got["image"]["height"]) == (128, 128)
+    assert got["image"]["full_size"] == [300, 300]
+    assert Image.open(got["path"]).size == (300, 300)

@@ -41,29 +41,48 @@ def register(app: typer.Typer) -> None:
         ] = "metric",
         budget_usd: Annotated[
             float | None,
-            typer.Option("--budget-usd", min=0, help="Money budget of each model-judged run "
-                         "that sets none itself."),  # fmt: skip
+            typer.Option(
+                "--budget-usd",
+                min=0,
+                help="Money budget of each model-judged run that sets none itself.",
+            ),  # fmt: skip
         ] = None,
         budget_calls: Annotated[
             int | None,
-            typer.Option("--budget-calls", min=0, help="Call budget of each model-judged run "
-                         "that sets none itself."),  # fmt: skip
+            typer.Option(
+                "--budget-calls",
+                min=0,
+                help="Call budget of each model-judged run that sets none itself.",
+            ),  # fmt: skip
         ] = None,
-        max_runs: Annotated[
-            int, typer.Option("--max-runs", min=1, help="Runs going at once.")
-        ] = 2,
+        max_runs: Annotated[int, typer.Option("--max-runs", min=1, help="Runs going at once.")] = 2,
         max_dim: Annotated[
             int | None,
-            typer.Option("--max-dim", metavar="N", help="Downsample volumes to at most N "
-                         "voxels per axis unless a tool asks otherwise."),  # fmt: skip
+            typer.Option(
+                "--max-dim",
+                metavar="N",
+                help="Downsample volumes to at most N "
+                "voxels per axis unless a tool asks otherwise.",
+            ),  # fmt: skip
         ] = None,
         device: Annotated[
             str, typer.Option("--device", help="Where to render: auto, cpu or cuda.")
         ] = "auto",
+        picture_side: Annotated[
+            int,
+            typer.Option(
+                "--picture-side",
+                min=64,
+                max=1568,
+                help="Longest side of the pictures "
+                "sent to agents (their files keep the full size).",
+            ),  # fmt: skip
+        ] = 768,
         http: Annotated[
             bool,
-            typer.Option("--http", help="Serve streamable HTTP on 127.0.0.1 (with a token) "
-                         "instead of stdio."),  # fmt: skip
+            typer.Option(
+                "--http", help="Serve streamable HTTP on 127.0.0.1 (with a token) instead of stdio."
+            ),  # fmt: skip
         ] = False,
         port: Annotated[int, typer.Option("--port", help="HTTP port (0: a free one).")] = 0,
     ) -> None:
@@ -88,6 +107,7 @@ def register(app: typer.Typer) -> None:
             max_live=max_runs,
             max_dim=max_dim,
             device=device,
+            picture_side=picture_side,
         )
         if not http:
             from intuitf.mcp.server import run_stdio
