@@ -63,3 +63,12 @@ def test_batch_help_shows_the_ray_and_failure_options(capsys):
     text = " ".join(capsys.readouterr().out.split())
     for flag in ("--ray", "[ADDRESS]", "--ray-timeout", "--max-failures"):
         assert flag in text
+
+
+def test_serve_refuses_a_port_out_of_range_and_a_runs_file(tmp_path, capsys):
+    msg = _fails(["serve", "--port", "99999", "--no-browser"], capsys)
+    assert "--port" in msg and "65535" in msg
+    a_file = tmp_path / "runs"
+    a_file.write_text("x")
+    msg = _fails(["serve", "--runs", str(a_file), "--no-browser"], capsys)
+    assert "is a file, not a folder" in msg

@@ -81,7 +81,9 @@ def register(app: typer.Typer) -> None:
         runs: Annotated[
             Path, typer.Option("--runs", help="Folder of the runs (the history).")
         ] = Path("runs"),
-        port: Annotated[int, typer.Option("--port", help="Port (0: a free one).")] = 0,
+        port: Annotated[
+            int, typer.Option("--port", min=0, max=65535, help="Port (0: a free one).")
+        ] = 0,
         host: Annotated[
             str, typer.Option("--host", help="Address to bind (default loopback only).")
         ] = "127.0.0.1",
@@ -133,6 +135,10 @@ def register(app: typer.Typer) -> None:
             data = Path(os.environ["INTUITF_DATA"])
         if data is not None and not data.is_dir():
             raise IntuitfError(f"--data {data}: no such folder.", "Give a folder of volumes.")
+        if Path(runs).exists() and not Path(runs).is_dir():
+            raise IntuitfError(
+                f"--runs {runs} is a file, not a folder.", "Give the folder that holds the runs."
+            )
         for v in volumes or []:
             if v not in ("phantom", "builtin:phantom") and not Path(v).exists():
                 raise IntuitfError(f"{v}: no such volume file.", "Check the path.")
