@@ -15,8 +15,9 @@ structure:
 - **haze**: the share of the picture that only background makes visible (alpha > 0.05 when
   every named or unnamed foreground label is removed).
 
-Judges: ``metric`` (the built-in MetricJudge) and ``oracle`` (a labelling oracle: it prefers,
-in each pair, the picture whose labelled structures are closer to the asked colours and with less
+Judges: ``metric`` (the built-in MetricJudge) and ``oracle`` (a labelling oracle: the fake
+model server names the structures from the label volumes, 10 % of the names wrong, and in each
+pair prefers the picture whose labelled structures are closer to the asked colours and with less
 haze, wrong 10 % of the time). Cases:
 
     bonsai       "A potted tree with brown pot, silver branch and golden leaves"
@@ -392,6 +393,8 @@ def run_case(case: Case, judge_kind: str, args, seed: int) -> dict:
     else:
         intent = Intent(kind="text", text=case.intent)
     judge = MetricJudge() if judge_kind == "metric" else label_oracle(scene, asked, 0.1, seed)
+    if judge_kind == "oracle":
+        _name_from_labels(scene, seed)
     first, best, undecided = _run(scene, intent, judge, _settings(args, seed))
     _save(args, f"{case.name}-{judge_kind}-{seed}", scene, first, best)
     return {
@@ -403,6 +406,22 @@ def run_case(case: Case, judge_kind: str, args, seed: int) -> dict:
         "indistinct": undecided,
         "seconds": time.perf_counter() - t0,
     }
+
+
+def _name_from_labels(scene: Scene, seed: int) -> None:
+    """With the oracle, the structures are named by the fake model server from the labels
+    (10 % wrong), as a model judge would name them from the atlas. Code without structure
+    naming skips this."""
+    try:
+        from intuitf.intent.atlas import name_structures
+        from intuitf.testing.fake_labels import LabelNamer
+        from intuitf.testing.fake_mllm import FakeMLLMServer
+    except ImportError:
+        return
+    names = {v: k for k, v in scene.ids.items()}
+    namer = LabelNamer(scene.vol.data, scene.lab, names, error_rate=0.1, seed=seed)
+    with FakeMLLMServer(target=np.zeros((8, 8, 3), np.uint8), labeller=namer) as srv:
+        name_structures(scene.vol, srv.base_url, size=96)
 
 
 def _save(args, stem: str, scene: Scene, first, best) -> None:

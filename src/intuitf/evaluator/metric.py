@@ -29,7 +29,9 @@ aspect key                     measure (higher is better unless noted)
                                "opaque" / "semi-opaque" / "transparent" / "faint" against the
                                mean colour distance of the foreground from the background;
                                "colorful" / "vibrant" against colour variety; "high-contrast"
-                               against contrast. A text with none of these is a tie.
+                               against contrast. A text with none of these that asks for
+                               a clear view ("show its structure clearly", "details") is
+                               judged by feature discrimination; otherwise it is a tie.
 ``color_style_matching``       CIELAB colour-distribution similarity to the reference image:
                                intersection of coarse (L*, a*, b*) histograms of both
                                foregrounds, minus the distance of their mean colours / 100
@@ -331,11 +333,17 @@ class MetricJudge:
             parts.append(min(1.0, f.variety / 6.0))
         if _CONTRAST_RE.search(text):
             parts.append(min(1.0, f.contrast * 3.0))
+        if not parts and _CLEAR_RE.search(text):
+            # "Show its structure clearly": what can be checked is how clearly structures
+            # are told apart (a tie here left a whole generation unranked).
+            return float(min(1.0, f.quality.discrimination / 1.5))
         if not parts:
             return None
         # "Judged together with its visual quality": a veil or speckle counts against a
         # rendering however well its colours match the words.
-        return float(np.mean(parts)) * (0.3 + 0.7 * f.quality.clarity)
+        # A colour painted over the volume's box is not on any structure the words name.
+        box = BOX_TEXT_PENALTY if f.quality.box else 1.0
+        return float(np.mean(parts)) * (0.3 + 0.7 * f.quality.clarity) * box
 
     def _ref_colour(self, f: _Features, intent: Intent) -> float | None:
         if intent.reference is None:
@@ -522,6 +530,12 @@ def _edit_region(intent: Intent, shape: tuple[int, int]) -> np.ndarray | None:
     mask, _ = _strokes(intent, shape)
     return mask
 
+
+#: Text alignment kept when the picture's silhouette is the volume's box (a painted box).
+BOX_TEXT_PENALTY = 0.35
+
+#: Words asking for a clear picture of the structures (checked by feature discrimination).
+_CLEAR_RE = re.compile(r"\b(clear(ly|er)?|structures?|details?|distinguish\w*|see)\b")
 
 _MORE_OPAQUE_RE = re.compile(
     r"\b(more (opaque|solid|visible|prominent)|less (transparent|translucent|faint)|"

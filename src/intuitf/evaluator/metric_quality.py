@@ -13,8 +13,10 @@ image, so that renderings of any size compare alike):
   (within ΔE 8 of the background: a tinted murk over the box). Up to a tenth of the
   foreground is tolerated; beyond that the clarity falls with the square of the excess.
 - **box**: when the silhouette is the volume's box (a convex polygon of a few straight
-  sides, :func:`box_silhouette`), the background's own values are painted: every nearly
-  colourless foreground pixel counts as veil however bright, and the clarity is halved.
+  sides, or a hexagon at most that fits it closely when parts of the object stick out of it:
+  :func:`box_silhouette`), the background's own values are painted: every nearly
+  colourless foreground pixel counts as veil however bright, and so does every faint one
+  (within ΔE 40 of the background) whatever its colour, and the clarity is halved.
 - **grain** (noise): the ratio of fine-scale lightness energy (the image minus its
   σ = 0.8 px blur) to medium-scale energy (σ = 0.8 minus σ = 2.5 px); edges of real
   structures carry energy at both scales, speckle only at the fine one. Grain above 0.5
@@ -63,6 +65,8 @@ VEIL_DIM = 8.0
 BOX_SOLIDITY = 0.95
 BOX_SIDES = 9
 BOX_AREA = 0.1
+#: ... or, when bits stick out of it, a hexagon at most fits it this well (IoU).
+BOX_FIT = 0.93
 #: Clarity kept when the box shows (the background itself is painted).
 BOX_PENALTY = 0.5
 #: Share of the foreground that may be veil before the clarity falls.
@@ -117,7 +121,33 @@ def box_silhouette(fg: np.ndarray) -> bool:
     if area < BOX_SOLIDITY * int(convex_hull_image(blob).sum()):
         return False
     contour = max(find_contours(np.pad(blob, 1).astype(np.float32), 0.5), key=len)
-    return len(approximate_polygon(contour, tolerance=2.0)) - 1 <= BOX_SIDES
+    if len(approximate_polygon(contour, tolerance=2.0)) - 1 <= BOX_SIDES:
+        return True
+    # Something inside the box may stick out of its outline here and there (a pot at the
+    # bottom of a bonsai's fog): the box is then still a hexagon at most that covers the blob.
+    return _hexagon_fit(blob) >= BOX_FIT
+
+
+def _hexagon_fit(blob: np.ndarray) -> float:
+    """Intersection over union of ``blob`` and the polygon of at most six sides that
+    approximates its convex hull (1 for a box seen in perspective; about 0.83 for a disc)."""
+    from skimage.draw import polygon as fill_polygon
+
+    hull = convex_hull_image(blob)
+    contour = max(find_contours(np.pad(hull, 1).astype(np.float32), 0.5), key=len)
+    for tol in (1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0):
+        poly = approximate_polygon(contour, tolerance=tol)
+        if len(poly) - 1 <= 6:
+            break
+    else:
+        return 0.0
+    shape = (blob.shape[0] + 2, blob.shape[1] + 2)
+    rr, cc = fill_polygon(poly[:, 0], poly[:, 1], shape)
+    area = np.zeros(shape, bool)
+    area[rr, cc] = True
+    area = area[1:-1, 1:-1]
+    union = float((area | blob).sum())
+    return float((area & blob).sum()) / union if union else 0.0
 
 
 def _entropy(counts: np.ndarray) -> float:
@@ -148,6 +178,9 @@ def quality(rgb: np.ndarray) -> Quality:
     box = box_silhouette(fg)
     dim = dist < (np.inf if box else VEIL_DELTA_E)  # in a painted box, bright fog too
     veil_px = fg & ((dim & (saturation < VEIL_SATURATION)) | (dist < VEIL_DIM))
+    if box:
+        # A painted box is fog in whatever colour: its faint pixels show no structure.
+        veil_px |= fg & (dist < VEIL_DELTA_E)
     # A veil is an area: thin grey lines (fine vessels, edges seen at 128 px) are structure.
     veil_px = ndimage.binary_opening(veil_px, structure=np.ones((3, 3), bool))
     veil = float(veil_px.sum()) / n
