@@ -257,6 +257,12 @@ def browser_part(base: str, token: str, args, chromium: str, hist: dict) -> dict
         stats = page.evaluate("window.intuitfDebug.gl.stats")
         out["long tasks"] = page.evaluate("window.__long")
         out["first picture"] = stats["firstPicture"][args.volume]
+        page.wait_for_function(
+            "id => window.intuitfDebug.gl.stats.firstFull[id] !== undefined", arg=args.volume
+        )
+        out["first full"] = page.evaluate(
+            f"window.intuitfDebug.gl.stats.firstFull[{args.volume!r}]"
+        )
         out["load"] = stats["loadMs"][args.volume]
         out["tf"] = page.evaluate("import('/static/state.js').then(S => S.shownTF())")
         out["camera"] = page.evaluate("window.intuitfDebug.state.camera")
@@ -344,6 +350,8 @@ def report(args, res: dict, load_before, load_after) -> None:
     print("|---|---|---|---|")
     row("first picture after choosing the volume", res["first picture wall"], 3000)
     row("  of which in the page: texture fetched, blocks, uploaded, drawn", res["first picture"])
+    row("first full-resolution picture (page clock; software draws a half-size one first)",
+        res["first full"])  # fmt: skip
     row("  of which texture fetched, block ranges computed, uploaded", res["load"])
     for size, target in ((256, 200), (512, 600)):
         row(f"page frame {size}² shaded, camera turning (drag)", res[f"page {size} shaded"], target)

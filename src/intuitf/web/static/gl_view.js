@@ -27,6 +27,7 @@ export const stats = {
   frames: 0,
   last: null, // {quality, ms, width, height}
   firstPicture: {}, // volume id → ms from choosing it to its first picture
+  firstFull: {}, // volume id → ms from choosing it to its first full-resolution picture
   loadMs: {}, // volume id → ms to fetch and upload its texture
   pickMs: null,
 };
@@ -113,6 +114,7 @@ export function ready(id) {
 export function draw(ctx, { tf, camera, size, shading, background, quality }) {
   let scale = 1;
   if (quality === "drag" && R.software) scale = DRAG_SCALES[dragLevel];
+  if (quality === "first") scale = R.software ? 0.5 : 1;
   const side = Math.max(16, Math.round(size * scale));
   const ms = R.render({ tf, camera, width: side, height: side, shading, background });
   ctx.imageSmoothingEnabled = true;
@@ -127,8 +129,11 @@ export function draw(ctx, { tf, camera, size, shading, background, quality }) {
   }
   stats.frames += 1;
   stats.last = { quality, ms: Math.round(ms * 10) / 10, width: side, height: side };
-  if (quality === "full" && vol.id && stats.firstPicture[vol.id] === undefined) {
+  if (vol.id && stats.firstPicture[vol.id] === undefined) {
     stats.firstPicture[vol.id] = Math.round(performance.now() - vol.started);
+  }
+  if (quality === "full" && vol.id && stats.firstFull[vol.id] === undefined) {
+    stats.firstFull[vol.id] = Math.round(performance.now() - vol.started);
   }
   return { ms, width: side, height: side, reduced: side < size };
 }
@@ -151,6 +156,11 @@ export function prepare(tf, camera, size) {
   const t0 = performance.now();
   attribution(tf, camera, size);
   stats.prepared = { ms: Math.round(performance.now() - t0), size };
+}
+
+/** Whether a volume's first picture comes at half resolution first (software only). */
+export function progressive() {
+  return !!R && R.software;
 }
 
 /** The pick can run here (float render targets): otherwise the server picks. */

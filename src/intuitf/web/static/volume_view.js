@@ -58,7 +58,8 @@ export function initVolumeView() {
   noteEl.setAttribute("aria-live", "polite");
   stage.append(noteEl);
   glv.initGLView({
-    onReady: () => frame("full"),
+    // In software, a volume's first picture comes at half resolution, the full one right after.
+    onReady: () => frame(glv.progressive() ? "first" : "full"),
     onNote: (text) => {
       noteEl.textContent = text;
     },
@@ -204,7 +205,7 @@ export function frame(quality = "full") {
     size: viewSize,
     shaded: state.shaded,
     background: hexToRgb(state.background),
-    quality,
+    quality: quality === "drag" ? "drag" : "full",
   };
   if (state.selected.size) msg.highlight = [...state.selected].sort((a, b) => a - b);
   lastTargetKey = JSON.stringify(t).slice(0, 200);
@@ -247,6 +248,7 @@ function drawPageFrame() {
   noteEl.textContent = res.reduced
     ? `${base ? `${base} ` : ""}Dragging at ${res.width}² (software WebGL is slow here); ${viewSize}² on release.`
     : base;
+  if (quality === "first") setTimeout(() => frame("full"), 0);
   if (quality === "full") {
     set({ viewSettled: { camera, size: viewSize, shaded: state.shaded, key: JSON.stringify(t0key(gt)), n: frameCount } });
     if (state.selected.size) drawOverlay();
