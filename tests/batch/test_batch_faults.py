@@ -198,3 +198,20 @@ def test_the_batch_report_is_self_contained_with_undecided_figures(batch_inputs,
     assert "9 of 30 (30 %)" in page and "9 of 70 matches (13 %)" in page
     sheet = load_image(paths["contact_sheet"])
     assert sheet.shape[1] >= 3 * 320  # three tiles of 320 pixels side by side
+
+
+def test_a_ray_client_address_without_the_client_says_what_to_install(monkeypatch):
+    from intuitf.errors import IntuitfError
+
+    monkeypatch.setitem(sys.modules, "grpc", None)  # as if ray[client] were not installed
+    with pytest.raises(IntuitfError) as info:
+        runner._check_reachable("ray://127.0.0.1:10001", 5.0)
+    assert "ray[client]" in str(info.value) or "intuitf[ray]" in str(info.value)
+
+
+def test_a_ray_client_address_that_does_not_answer_fails_at_once():
+    pytest.importorskip("grpc")
+    from intuitf.errors import IntuitfError
+
+    with pytest.raises(IntuitfError, match="Cannot reach a Ray cluster at ray://127.0.0.1:1"):
+        runner._check_reachable("ray://127.0.0.1:1", 5.0)
