@@ -65,4 +65,7 @@ def test_small_pictures_composite_to_the_kernels_bytes():
     h, w = rgba.shape[:2]
     kernel = np.empty((h * w, 3), dtype=np.uint8)
     kernels.to_rgb8(np.ascontiguousarray(rgba.reshape(h * w, 4)), r.background, kernel)
+    assert np.array_equal(r.to_rgb8_single(rgba), kernel.reshape(h, w, 3))
     assert np.array_equal(r.to_rgb8(rgba), kernel.reshape(h, w, 3))
+    tf = random_tf(np.random.default_rng(3))
+    assert np.array_equal(r.render(tf, Camera(azimuth=30, elevation=20)), kernel.reshape(h, w, 3))

@@ -52,3 +52,19 @@ def test_judge_middleware_sees_every_match_and_render_hooks_time_every_render():
     assert len(renders) == 1 + SMALL["population"]  # removed: not called again
     assert len(wrapped) == 2 and wrapped[1].calls > 0
     s.close()
+
+
+def test_a_run_in_memory_records_its_journal_and_checkpoints():
+    from intuitf.session.recorder import MemoryRecorder
+
+    spec = RunSpec.model_validate({"volume": {"source": "phantom"}, "settings": SMALL})
+    s = Session.open(spec, None, volume=phantom(32))
+    assert isinstance(s.recorder, MemoryRecorder) and s.recorder.events_path is None
+    s.run(write_outputs=False)
+    gens = [e for e in s.recorder.entries if e["type"] == "generation"]
+    assert [e["generation"] for e in gens] == [0, 1]
+    assert gens[-1]["candidates"] and gens[-1]["best_id"] == s.last_ranking[0]
+    assert s.recorder.entries[-1]["type"] == "end"
+    assert s.recorder.checkpoints == [1, 2]
+    assert s.recorder.last_checkpoint["generation"] == 2
+    assert s.recorder.last_checkpoint["ranking"] == s.last_ranking

@@ -26,9 +26,10 @@ ALPHA_EPSILON = 1e-5
 #: Rays stop once their transmittance drops below this: what is lost stays under 1/255.
 EARLY_STOP = 1.0 / 255.0
 MAX_IMAGE_SIDE = 4096
-#: Pictures up to this many pixels are composited over the background with NumPy: the same
-#: bytes as the parallel kernel, without a kernel launch that on a busy machine waits for an
-#: OpenMP thread to be scheduled (about 10 ms a frame under load, for little work).
+#: A single picture (``render``: views, drag frames, previews) up to this many pixels is
+#: composited over the background with NumPy: the same bytes as the parallel kernel, without a
+#: kernel launch that on a busy machine waits for an OpenMP thread to be scheduled (about 10 ms
+#: a frame under load, for little work). A generation's pictures keep the kernel.
 NUMPY_COMPOSITE_PIXELS = 512 * 512
 
 __all__ = ["BLOCK_SIZE", "VolumeRenderer"]
@@ -171,16 +172,26 @@ class VolumeRenderer:
         return self._cuda
 
     def to_rgb8(self, rgba: np.ndarray) -> np.ndarray:
-        """Composite premultiplied RGBA (H, W, 4) over the background: uint8 (H, W, 3)."""
+        """Composite premultiplied RGBA (H, W, 4) over the background: uint8 (H, W, 3).
+
+        The parallel kernel: the fastest on a machine with a core to spare (a generation's
+        pictures, from the sample cache, come this way).
+        """
         h, w = rgba.shape[:2]
-        if h * w <= NUMPY_COMPOSITE_PIXELS:
-            # The kernel's arithmetic (float64, +0.5, clamp, truncate), so the same bytes.
-            a = rgba.astype(np.float64, copy=False)
-            v = (a[..., :3] + (1.0 - a[..., 3:4]) * self.background) * 255.0 + 0.5
-            return np.clip(v, 0.0, 255.0).astype(np.uint8)
         out = np.empty((h * w, 3), dtype=np.uint8)
         kernels.to_rgb8(np.ascontiguousarray(rgba.reshape(h * w, 4)), self.background, out)
         return out.reshape(h, w, 3)
+
+    def to_rgb8_single(self, rgba: np.ndarray) -> np.ndarray:
+        """:meth:`to_rgb8` for one interactive picture: up to NUMPY_COMPOSITE_PIXELS pixels
+        with NumPy, in the kernel's arithmetic (float64, +0.5, clamp, truncate: the same
+        bytes), without a parallel launch that waits for a thread on a busy machine."""
+        h, w = rgba.shape[:2]
+        if h * w > NUMPY_COMPOSITE_PIXELS:
+            return self.to_rgb8(rgba)
+        a = rgba.astype(np.float64, copy=False)
+        v = (a[..., :3] + (1.0 - a[..., 3:4]) * self.background) * 255.0 + 0.5
+        return np.clip(v, 0.0, 255.0).astype(np.uint8)
 
     # -- direct rendering -----------------------------------------------------------------
     def render_rgba(
@@ -221,7 +232,7 @@ class VolumeRenderer:
         """RGB uint8 (H, W, 3) of ``tf`` from ``camera``, composited over the background."""
         if self.device == "cuda":
             return self._cuda_backend().march(self.lut(tf)[None], self.frame(camera))[0]
-        return self.to_rgb8(self.render_rgba(tf, camera))
+        return self.to_rgb8_single(self.render_rgba(tf, camera))
 
     def sample_cache(self, camera: Camera | None = None) -> CacheViews:
         """Sample the volume once along every ray of ``camera``: a :class:`SampleCache`

@@ -22,6 +22,7 @@ from intuitf.session.helpers import (
     _with_selection,
 )
 from intuitf.session.human import HumanVerdict
+from intuitf.session.recorder import recorder_for
 from intuitf.session.rundir import RunDirectory
 from intuitf.session.settings import RunSettings
 from intuitf.session.spec import RunSpec, parse_spec
@@ -304,8 +305,9 @@ class SessionOpening:
                 # verdict store still holds whatever was paid for.
                 sess = cls._new(vol, intent, judge, settings, None, initial_tfs, False, spec, lock)
                 sess.run_dir = rd
+                sess.recorder = recorder_for(rd)
                 sess.name = rd.root.name
-                sess.events = EventLog(sess.name, rd.events)
+                sess.events = EventLog(sess.name, sess.recorder.events_path)
                 sess.cost = _paid(judge, sess.cost, rd)
             else:
                 sess = cls._from_checkpoint(vol, intent, judge, settings, rd, ckpt, spec, lock)

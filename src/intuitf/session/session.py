@@ -54,6 +54,7 @@ from intuitf.session.helpers import _judge_name, _paid
 from intuitf.session.human import HumanVerdict, refit_ranking, stated_orders
 from intuitf.session.interaction import SessionInteraction
 from intuitf.session.opening import SessionOpening
+from intuitf.session.recorder import RunRecorder, recorder_for
 from intuitf.session.records import GenerationRecord, RunOutcome, SessionSnapshot
 from intuitf.session.rundir import RunDirectory
 from intuitf.session.scheduler import BATCH, render_scheduler
@@ -188,7 +189,9 @@ class Session(SessionOpening, SessionInteraction):
         self._images: dict[str, np.ndarray] = {}
         self.records: list[GenerationRecord] = []
         self.generation_seconds: list[float] = []
-        self.events = EventLog(self.name, run_dir.events if run_dir else None)
+        #: Where the journal, checkpoints and pictures go (a run folder, or memory).
+        self.recorder: RunRecorder = recorder_for(run_dir)
+        self.events = EventLog(self.name, self.recorder.events_path)
         self._lock = lock
         self._state_lock = threading.RLock()
         self._status = "idle"
@@ -654,21 +657,20 @@ class Session(SessionOpening, SessionInteraction):
         return self._finish(reason, message, write_outputs)
 
     def _finish(self, reason: str, message: str, write_outputs: bool) -> RunOutcome:
-        if self.run_dir is not None:
-            try:
-                self._journal(
-                    {
-                        "type": "end",
-                        "generation": self.generation,
-                        "reason": reason,
-                        "message": message,
-                        "cost": self.cost.to_dict(),
-                    }
-                )
-                if write_outputs and self.last_ranking:
-                    self.write_outputs()
-            except IntuitfError as exc:  # e.g. the disk filled up while saving outputs
-                reason, message = "storage", f"{message} Saving outputs failed: {exc}"
+        try:
+            self._journal(
+                {
+                    "type": "end",
+                    "generation": self.generation,
+                    "reason": reason,
+                    "message": message,
+                    "cost": self.cost.to_dict(),
+                }
+            )
+            if self.run_dir is not None and write_outputs and self.last_ranking:
+                self.write_outputs()
+        except IntuitfError as exc:  # e.g. the disk filled up while saving outputs
+            reason, message = "storage", f"{message} Saving outputs failed: {exc}"
         self._ended = reason
         self._refresh("ended")
         self.events.emit("run_ended", reason=reason, message=message, cost=self.cost.to_dict(),
@@ -773,12 +775,9 @@ class Session(SessionOpening, SessionInteraction):
         self.close()
 
     def _journal(self, entry: dict) -> None:
-        if self.run_dir is not None:
-            self.run_dir.append_journal(entry)
+        self.recorder.journal(entry)
 
     def _checkpoint(self) -> None:
-        if self.run_dir is None:
-            return
         state = {
             "generation": self.generation,
             "stage_index": self.stage_index,
@@ -799,9 +798,7 @@ class Session(SessionOpening, SessionInteraction):
         }
         if self._current_intent_record is not None:
             state["intent"] = self._current_intent_record
-        self.run_dir.write_checkpoint(state)
-        # Kept per generation too: a branch can start from any generation and reproduce it.
-        self.run_dir.write_generation_checkpoint(self.generation, state)
+        self.recorder.checkpoint(self.generation, state)
         self._paid_at_checkpoint = Cost(**self.cost.to_dict())
 
     def _paid_this_generation(self, judged: Cost) -> dict:
@@ -827,23 +824,21 @@ class Session(SessionOpening, SessionInteraction):
         }
 
     def _write_generation_pictures(self, g: int, candidates, ranking: list[str]) -> None:
-        if self.run_dir is None:
+        if not self.recorder.keeps_pictures:
             return
         from intuitf.imageio import png_bytes, render_record
         from intuitf.plots import contact_sheet
-        from intuitf.session.rundir import atomic_write_bytes
 
         order = {cid: i for i, cid in enumerate(ranking)}
         ordered = sorted(candidates, key=lambda c: order[c.id])
         imgs = [self._images[c.id] for c in ordered]
         caps = [f"#{order[c.id] + 1} {c.id} {self.ratings[c.id]:.0f}" for c in ordered]
         sheet = contact_sheet(imgs, caps, columns=8)
-        atomic_write_bytes(self.run_dir.generation_sheet(g), png_bytes(sheet))
         # The generation's best, small, for the history view.
         best = self._images[ordered[0].id]
         record = render_record(self.camera, (best.shape[1], best.shape[0]), self.volume.name,
                                shading=self.settings.shading)  # fmt: skip
-        atomic_write_bytes(self.run_dir.generation_sheet(g, best=True), png_bytes(best, record))
+        self.recorder.generation_pictures(g, png_bytes(sheet), png_bytes(best, record))
 
 
 # -- helpers --------------------------------------------------------------------------------
