@@ -139,6 +139,19 @@ def test_a_400_about_something_else_leaves_structured_output_on():
     assert j.structured and not j.adaptations and srv.stats.requests == 1
 
 
+def test_a_server_without_json_schema_gets_json_mode(oracle_images):
+    target, c = oracle_images
+    with FakeMLLMServer(target=target, structured="json_object") as srv:
+        j = MLLMJudge("default", base_url=srv.base_url, swap="never")
+        v1 = asyncio.run(j.compare(c[0], c[3], Q, Intent()))
+        v2 = asyncio.run(j.compare(c[4], c[1], Q, Intent()))
+    assert v1.overall is Choice.FIRST and v2.overall is Choice.SECOND and v2.rationale
+    assert j.profile.structured == "json_object" and j.structured
+    assert [a["what"] for a in j.adaptations] == ["response_format=json_schema"]
+    assert srv.requests_log[-1]["response_format"] == {"type": "json_object"}
+    assert srv.stats.requests == 3
+
+
 def test_unsupported_effort_value_is_replaced_by_a_listed_one():
     err = openai.BadRequestError(
         "bad",
