@@ -329,7 +329,8 @@ class WorkerCore:
                 limiter = self.limiter
                 session.add_judge_middleware(lambda judge: ThrottledJudge(judge, limiter))
             if self.watch is not None:  # checked before each comparison
-                session.judge = LeasedJudge(session.judge, self.watch, self.stop)
+                watch = self.watch
+                session.add_judge_middleware(lambda judge: LeasedJudge(judge, watch, self.stop))
             timing = _Timing(session)
             if self.stopping:
                 session.cancel()
