@@ -443,10 +443,12 @@ def run_refine(scene: Scene, judge_kind: str, args, seed: int) -> dict:
     )
     _, base_tf, _ = _run(scene, Intent(kind="text", text=bonsai.intent), judge,
                          _settings(args, seed))  # fmt: skip
-    pot_vals = scene.vol.data[scene.lab == scene.ids["pot"]]
-    lo, hi = np.percentile(pot_vals, [5, 95])
-    sel = tuple(i for i, g in enumerate(base_tf.gaussians)
-                if lo - g.width <= g.mean <= hi + g.width and g.height > 0)  # fmt: skip
+    # Clicking the pot selects the features that show it: the Gaussians that give its visible
+    # pixels at least a fifth of their opacity (the renderer's per-Gaussian attribution).
+    mask, _ = visible(scene, base_tf, "pot")
+    attr = scene.renderer("all").sample_cache(scene.camera).attribution(base_tf)
+    share = attr[:, mask].sum(axis=1) / max(float(attr[:, mask].sum()), 1e-9)
+    sel = tuple(int(i) for i in np.flatnonzero(share >= 0.2)) if mask.any() else ()
     if not sel:
         return {"case": "refine-pot", "judge": judge_kind, "seed": seed, "skipped":
                 "no Gaussian of the base shows the pot"}  # fmt: skip

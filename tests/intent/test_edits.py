@@ -90,7 +90,7 @@ def test_every_first_population_keeps_the_background_clear(kind):
     assert len(bg) == 1 and bg[0].hidden
     ex = make_explorer("ga", population=24, n_gaussians=5, generations=3, seed=3,
                        histogram=vol.histogram()[0], hints=hints)  # fmt: skip
-    lo, hi = bg[0].center - bg[0].spread, bg[0].center + bg[0].spread
+    lo, hi = bg[0].center - bg[0].spread, bg[0].center + 2.5 * bg[0].spread
     s = np.linspace(max(0.0, lo), hi, 40)
     for c in ex.ask():
         assert float(c.tf.opacity(s).max()) <= 5 * HIDDEN_EPS, c.id

@@ -247,13 +247,17 @@ def edit_step(g: Gaussian, hint: Hint, rng: np.random.Generator, bounds: Bounds)
 
 #: A Gaussian may give the values a hidden material mostly holds at most this opacity.
 HIDDEN_EPS = 2e-3
+#: ... from one spread below its hint's center to this many above (the background's hint
+#: reaches from its mode up to just below the first material: its noise too).
+HIDDEN_REACH = 2.5
 
 
 def quiet_hidden(tf: GaussianTF, hints: Sequence[Hint], bounds: Bounds) -> GaussianTF:
     """``tf`` with no free Gaussian showing a hidden material (the background, unless the
     words ask for it).
 
-    A hidden material's bulk is its hint's center ± one spread. A free Gaussian that gives
+    A hidden material's values are its hint's center from one spread below to
+    ``HIDDEN_REACH`` spreads above. A free Gaussian that gives
     those values more than ``HIDDEN_EPS`` of opacity is narrowed until it does not; one that
     sits on them, or would have to be narrower than the bounds allow, is switched off. Over
     a material as common as air, even a faint tail is a fog over the whole volume box.
@@ -269,7 +273,7 @@ def quiet_hidden(tf: GaussianTF, hints: Sequence[Hint], bounds: Bounds) -> Gauss
         if g.frozen or g.height <= HIDDEN_EPS:
             continue
         for h in hidden:
-            lo, hi = h.center - h.spread, h.center + h.spread
+            lo, hi = h.center - h.spread, h.center + HIDDEN_REACH * h.spread
             nearest = min(hi, max(lo, g.mean))
             gap = abs(g.mean - nearest)
             peak = g.height * math.exp(-(gap**2) / (2.0 * g.width**2))
