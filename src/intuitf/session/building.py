@@ -21,6 +21,7 @@ from typing import Any
 from intuitf.errors import IntuitfError, SessionError
 from intuitf.evaluator.types import Intent
 from intuitf.render.camera import DEFAULT_AZIMUTH, DEFAULT_ELEVATION
+from intuitf.session.rundir import RunDirectory
 from intuitf.session.spec import IntentSpec, JudgeSpec, RunSpec, parse_spec
 
 INTENT_PICTURES = ("reference", "sketch", "base")
@@ -93,7 +94,7 @@ def build_judge(spec: JudgeSpec, run_dir: Path | None, protocol: str = "efficien
     options.update(spec.options)
     if spec.base_url:
         options["base_url"] = spec.base_url
-    cache = VerdictCache(run_dir / "verdicts.sqlite") if run_dir is not None else None
+    cache = VerdictCache(RunDirectory(run_dir).verdicts) if run_dir is not None else None
     budget = None
     if spec.budget_usd is not None or spec.budget_calls is not None:
         budget = Budget(max_usd=spec.budget_usd, max_calls=spec.budget_calls)
