@@ -97,8 +97,14 @@ def register(app: typer.Typer) -> None:
                 raise IntuitfError(f"--data {d}: no such folder.", "Give a folder of volumes.")
         if device not in ("auto", "cpu", "cuda"):
             raise IntuitfError(f"--device {device!r}: use auto, cpu or cuda.")
-        runs.mkdir(parents=True, exist_ok=True)
-        out.mkdir(parents=True, exist_ok=True)
+        for folder, flag in ((runs, "--runs"), (out, "--out")):
+            try:
+                folder.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:  # a desktop client may start us in a folder we cannot write
+                raise IntuitfError(
+                    f"{flag} {folder}: cannot make this folder ({exc.strerror or exc}).",
+                    f"Give {flag} an absolute path to a folder you can write.",
+                ) from None
         config = McpConfig(
             roots=Roots(data=list(data or []), runs=runs, out=out),
             evaluator=evaluator,
