@@ -232,3 +232,20 @@ def test_paths_checked_by_roots(tmp_path):
     for bad in ("../x.vp", "/tmp/x.vp", ".", "a"):
         with pytest.raises(PathRefused):
             roots.writable(bad)
+
+
+def test_command_line_mistakes_are_one_message(tmp_path, capsys):
+    from intuitf.cli.app import main
+
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    for argv, words in (
+        (["mcp", "--data", str(tmp_path / "nope")], "no such folder"),
+        (["mcp", "--runs", str(blocker / "runs")], "cannot make this folder"),
+        (["mcp", "--device", "tpu"], "auto, cpu or cuda"),
+    ):
+        with pytest.raises(SystemExit) as exc:
+            main(argv)
+        assert exc.value.code == 2
+        err = " ".join(capsys.readouterr().err.split())  # rich wraps long lines
+        assert words in err and "Traceback" not in err
