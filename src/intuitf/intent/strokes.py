@@ -165,6 +165,6 @@ def stroke_hints(
         if gap < 2.5 * (a[3] + b[3]):
             a[3] = b[3] = max(0.006, gap / 5.0)
     return [
-        StrokeHint(tuple(c / 255.0 for c in rgb), n, med, sp, share)  # type: ignore[arg-type]
+        StrokeHint(tuple(c / 255.0 for c in rgb), n, med, sp, share)
         for rgb, n, med, sp, share in found
     ]
