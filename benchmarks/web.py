@@ -298,6 +298,7 @@ def browser_part(base: str, token: str, args, chromium: str, hist: dict) -> dict
         if args.shots:
             Path(args.shots).mkdir(parents=True, exist_ok=True)
             page.screenshot(path=str(Path(args.shots) / f"{args.volume}_drag.png"))
+        page.evaluate("window.intuitfDebug.gl.stats.prepared = undefined")
         page.mouse.up()
         page.wait_for_timeout(300)
         drags = page.evaluate("window.__drag")

@@ -141,6 +141,8 @@ export function draw(ctx, { tf, camera, size, shading, background, quality }) {
 function attribution(tf, camera, size) {
   const key = JSON.stringify([vol.id, tfKey(tf), camera, size]);
   if (attrCache.key !== key) {
+    stats.attributionPasses = (stats.attributionPasses || 0) + 1;
+    stats.lastAttributionKey = key;
     const attr = R.attribution({ tf, camera, width: size, height: size });
     attrCache = { key, attr };
   }
