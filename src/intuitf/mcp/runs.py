@@ -408,9 +408,13 @@ class RunDesk:
         bg = check_background(None, settings)
         vr = await asyncio.to_thread(self.svc.shelf.view_renderer, ov, bg)
         images, out = [], []
+        # One camera for all: the volume is sampled once, each candidate is a LUT pass.
+        cache = await render_scheduler().run(
+            partial(vr.sample_cache, cam, size, shaded), INTERACTIVE
+        )
         for item in items:
             tf = (await asyncio.to_thread(self.store.candidate, item["id"])).tf
-            img = await render_scheduler().run(partial(vr.view, tf, cam, size, shaded), INTERACTIVE)
+            img = await render_scheduler().run(partial(cache.render, tf), INTERACTIVE)
             images.append(img)
             path = await asyncio.to_thread(
                 self.svc.save_picture, img, item["id"].replace("/", "-"), cam, vol, shaded, bg
@@ -514,10 +518,11 @@ class RunDesk:
         data["gaussian"] = tf.gaussians[chosen].to_dict()
 
         def pictures():
-            view = vr.view(tf, cam, size, shaded)
+            cache = vr.sample_cache(cam, size, shaded)  # the pick's, when there was one
+            view = cache.render(tf)
             if pick is not None and pick.mask is not None:
                 view = outline(view, pick.mask)
-            alone = vr.sample_cache(cam, size, shaded).render_feature(tf, chosen)
+            alone = cache.render_feature(tf, chosen)
             return side_by_side([view, alone])
 
         image = await render_scheduler().run(pictures, INTERACTIVE)
