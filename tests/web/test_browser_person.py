@@ -46,7 +46,7 @@ def open_page(browser, web_server, fragment: str = "", init: str | None = None):
     if init:
         pg.add_init_script(init)
     pg.goto(web_server.url + (f"#{fragment}" if fragment else ""))
-    pg.wait_for_selector("body.ready")
+    pg.wait_for_selector("body.ready", timeout=FIRST_S)  # a fresh server compiles first
     return pg
 
 
@@ -94,6 +94,16 @@ def click_until_picked(page, frac=((0.5, 0.5), (0.5, 0.42), (0.45, 0.55), (0.55,
         if m:
             return int(m.group(1)) - 1
     raise AssertionError("nothing picked under the clicks")
+
+
+def wait_new_run(page, timeout: float = 180_000) -> str:
+    """The run the page made current after Start (fails with the page's messages)."""
+    try:
+        page.wait_for_function("() => window.intuitfDebug.state.run", timeout=timeout)
+    except Exception:
+        said = page.locator("[data-testid=message]").all_inner_texts()
+        raise AssertionError(f"no run started; the page says {said}") from None
+    return js_state(page, "run")
 
 
 def wait_full_frame(page, timeout: float = FIRST_S) -> None:
@@ -164,8 +174,7 @@ def test_first_stage_without_words_and_features_on_the_preview(browser, web_serv
     page.fill("#q-generations", "1")
     page.fill("#q-image-size", "64")
     page.click("#q-start")
-    page.wait_for_function("() => window.intuitfDebug.state.run", timeout=60_000)
-    run = js_state(page, "run")
+    run = wait_new_run(page)
     d = web_server.wait_run(run)
     assert d["info"]["intent"]["kind"] == "none", d["info"]
     tree = json.dumps(web_server.api("GET", "/api/tree"))
@@ -181,8 +190,7 @@ def test_first_stage_without_words_and_features_on_the_preview(browser, web_serv
     page.fill("#q-text", "make it transparent")
     assert "Refine" in page.inner_text("#q-start")
     page.click("#q-start")
-    page.wait_for_function("() => window.intuitfDebug.state.run", timeout=60_000)
-    refine = js_state(page, "run")
+    refine = wait_new_run(page)
     d = web_server.wait_run(refine)
     intent = d["info"]["intent"]
     assert intent["kind"] == "edit" and intent["selected"] == [index], intent
@@ -219,15 +227,13 @@ def test_reloaded_page_follows_a_live_run_to_its_end(browser, web_server):
         "run => { const d = window.intuitfDebug.state.runDetail; return d && d.info.name === run; }",
         arg=name,
     )
-    g0 = int(re.search(r"g(\d+)-", js_state(page, "current")).group(1))
     web_server.api("POST", f"/api/runs/{name}/proceed")
-    page.wait_for_function(
-        "g => { const m = /g(\\d+)-/.exec(window.intuitfDebug.state.current || '');"
-        " return m && Number(m[1]) > g; }",
-        arg=g0,
-        timeout=FIRST_S,
-    )
-    web_server.wait_run(name)
+    # It follows: each generation's best becomes current as the generation ends (an elite
+    # may stay best, so the run's final best is what it must show in the end).
+    final = web_server.wait_run(name)["gallery"][0]["qid"]
+    page.wait_for_function("q => window.intuitfDebug.state.current === q", arg=final,
+                           timeout=10_000)  # fmt: skip
+    assert js_state(page, "follow") is True
     # The end shows within a few seconds (the top bar, the Pause and Stop buttons).
     page.wait_for_function(
         "() => { const d = window.intuitfDebug.state.runDetail;"
