@@ -76,9 +76,12 @@ def test_finished_run_detail_gallery_and_tree(client, done_run):
     assert [g["rank"] for g in gallery] == sorted(g["rank"] for g in gallery)
     assert all(g["qid"] == f"{name}/{g['id']}" for g in gallery)
     # The page draws a sketch over the run's judging view, and finds its volume by id.
-    from intuitf.render import Camera
+    from intuitf.session.building import default_camera
+    from intuitf.volume.phantom import phantom
 
-    assert done_run["camera"] == Camera().to_dict()  # the camera the run judged from
+    # The camera the run judged from: the session's default for the volume, as every front
+    # end's (the run named no camera).
+    assert done_run["camera"] == default_camera(phantom())
     volume_ids = [v["id"] for v in client.get("/api/volumes").json()]
     assert done_run["volume_id"] in volume_ids
     runs = client.get("/api/runs").json()
