@@ -242,6 +242,8 @@ def browser_part(base: str, token: str, args, chromium: str, hist: dict) -> dict
         page.goto(f"{base}/?token={token}")
         page.wait_for_selector("body.ready")
         out["gpu"] = page.evaluate("window.intuitfDebug.gl.renderer()?.gpu || 'no WebGL2'")
+        # The page first previews another volume: let it finish (its frame and attribution).
+        page.wait_for_function("() => window.intuitfDebug.gl.stats.prepared !== undefined")
         # First picture after choosing the volume (the page's own clock, from the choice).
         # Long main-thread tasks meanwhile show whether loading froze the page.
         page.evaluate(
