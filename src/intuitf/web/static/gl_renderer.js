@@ -98,8 +98,10 @@ export class GLVolumeRenderer {
   /** The page's limits for a volume texture: {maxBytes, maxSide}. */
   limits() {
     const mem = navigator.deviceMemory || 4; // GiB, coarse; absent outside Chromium
-    // A quarter of the device's memory at most, 1 GiB on a GPU, 512 MiB in software.
-    const cap = this.software ? 512 : 1024;
+    // A quarter of the device's memory at most, 1 GiB on a GPU. In software a frame costs
+    // in proportion to the voxels a ray crosses: 64 MiB (a 512×512×128 16-bit volume, or
+    // 400³ 8-bit) keeps a frame of seconds, not tens of seconds, where the CPU draws.
+    const cap = this.software ? 64 : 1024;
     return { maxBytes: Math.min(cap, mem * 256) * 1024 * 1024, maxSide: this.max3d };
   }
 

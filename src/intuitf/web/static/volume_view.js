@@ -243,7 +243,7 @@ function drawPageFrame() {
   canvas.dataset.frames = String(frameCount);
   canvas.dataset.renderer = "webgl2";
   const sw = glv.renderer().software ? " (software)" : "";
-  statsEl.textContent = `${res.width}×${res.height} ${quality} · ${Math.round(res.ms)} ms · WebGL2${sw}`;
+  statsEl.textContent = `${res.width}² ${quality} · ${Math.round(res.ms)} ms · WebGL2${sw}`;
   const base = glv.note();
   noteEl.textContent = res.reduced
     ? `${base ? `${base} ` : ""}Dragging at ${res.width}² (software WebGL is slow here); ${viewSize}² on release.`
