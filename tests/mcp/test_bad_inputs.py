@@ -194,9 +194,14 @@ def test_every_tool_refuses_bad_input_with_a_message(folders, monkeypatch):
     assert not (folders["data"].parent / "escape.json").exists()
 
 
-def test_error_messages_are_scrubbed_of_keys(folders, monkeypatch):
-    """An error that quotes a key (here a judge spec URL carrying it) shows asterisks instead."""
+def test_error_messages_are_scrubbed_of_keys(folders, monkeypatch, caplog):
+    """An error that quotes a key (here a judge spec carrying it) shows asterisks instead, in
+    the result and in the server's log."""
+    import logging
+
     from intuitf.mcp import build_server
+
+    caplog.set_level(logging.DEBUG)
 
     secret = "sk-live-0123456789abcdefXYZ"
     monkeypatch.setenv("INTUITF_TEST_API_KEY", secret)
@@ -209,6 +214,8 @@ def test_error_messages_are_scrubbed_of_keys(folders, monkeypatch):
 
     text = asyncio.run(main())
     assert secret not in text and "*" * len(secret) in text
+    assert "nosuch" in caplog.text  # the failure was logged ...
+    assert secret not in caplog.text  # ... without the key
 
 
 def test_paths_checked_by_roots(tmp_path):
