@@ -89,6 +89,19 @@ def test_runs_from_a_reference_picture_and_a_sketch(folders):
             asked = await call(client, "new_query", run=by_image["run"], generations=1,
                                intent={"kind": "image", "reference": base})  # fmt: skip
             again = await wait_run_end(client, by_image["run"])
+            # A branch from a candidate, with other words: the candidate joins its first
+            # population and the history links them.
+            best = await call(client, "gallery", run=by_sketch["run"], k=1, pictures=False)
+            cid = best["candidates"][0]["id"]
+            br = await call(client, "branch", run=by_sketch["run"], candidate=cid,
+                            changes={"intent": "white bone", "settings": {"generations": 1}})  # fmt: skip
+            assert br["candidate"] == cid.split("/")[1]
+            done = await wait_run_end(client, br["run"])
+            assert done["info"]["parent"]["candidate"] == cid.split("/")[1]
+            assert done["info"]["intent"]["kind"] == "text"
+            start = await call(client, "get_tf", candidate=f"{br['run']}/g000-000")
+            parent_tf = await call(client, "get_tf", candidate=cid)
+            assert start["tf"]["gaussians"] == parent_tf["tf"]["gaussians"]
             return ends, asked, again
 
     ends, asked, again = asyncio.run(main())
