@@ -111,3 +111,40 @@ def test_runs_from_a_reference_picture_and_a_sketch(folders):
     # The run folders hold copies of the pictures: the agent's files may go away.
     run_dir = folders["runs"] / ends[1]["run"]
     assert any(p.suffix == ".png" for p in (run_dir / "intent").iterdir())
+
+
+def test_a_client_leaving_stops_its_runs_cleanly_and_a_new_server_continues_them(folders):
+    from mcp_util import stdio_params
+
+    from intuitf.mcp import build_server
+    from intuitf.session.lock import in_use
+
+    long = {**SETTINGS, "population": 4, "generations": 40}
+
+    async def first():
+        async with Client(stdio_params(folders)) as client:
+            vid = (await call(client, "open_volume", path="phantom", max_dim=32))["id"]
+            run = (await call(client, "start_run", volume=vid, intent="white bone",
+                              judge="metric", settings=long))["run"]  # fmt: skip
+            got = await call(client, "wait_for_generation", run=run, timeout_s=120)
+            assert got["outcome"] == "generation_ended" and got["live"]
+            return run
+
+    run = asyncio.run(first())  # the client closes the server with the run going
+    assert not in_use(folders["runs"] / run)
+    server, _ = build_server(make_config(folders))
+
+    async def second():
+        async with Client(server) as client:
+            status = await call(client, "run_status", run=run)
+            assert status["info"]["status"] == "cancelled" and not status["live"]
+            done_before = status["info"]["generations_done"]
+            assert 1 <= done_before < 40
+            going = await call(client, "continue_run", run=run)
+            assert going["resumed"] and going["generation"] == done_before
+            await call(client, "wait_for_generation", run=run, timeout_s=120)
+            await call(client, "cancel_run", run=run)
+            return await wait_run_end(client, run), done_before
+
+    end, before = asyncio.run(second())
+    assert end["info"]["generations_done"] > before
