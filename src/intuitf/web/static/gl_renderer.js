@@ -214,7 +214,7 @@ export class GLVolumeRenderer {
    * (default true), background [r, g, b] in 0..1, sampleDistance. Returns the milliseconds
    * the GPU took (the call waits for the picture).
    */
-  render({ tf, camera, width, height, shading = true, background = [0, 0, 0], sampleDistance = DEFAULTS.sampleDistance, sync = true }) {
+  render({ tf, camera, width, height, shading = true, background = [0, 0, 0], sampleDistance = DEFAULTS.sampleDistance, sync = true, rows = null }) {
     const gl = this.gl;
     const t0 = performance.now();
     if (this.canvas.width !== width) this.canvas.width = width;
@@ -229,10 +229,16 @@ export class GLVolumeRenderer {
     gl.uniform1i(u.u_alphaOut, 0);
     gl.bindFramebuffer(gl.FRAMEBUFFER, null);
     gl.viewport(0, 0, width, height);
+    // `rows` [y0, y1) (from the bottom) draws one band: the rest of the canvas is kept.
+    if (rows) {
+      gl.enable(gl.SCISSOR_TEST);
+      gl.scissor(0, rows[0], width, rows[1] - rows[0]);
+    }
     gl.drawArrays(gl.TRIANGLES, 0, 3);
+    if (rows) gl.disable(gl.SCISSOR_TEST);
     if (sync) {
       const px = new Uint8Array(4);
-      gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px); // waits for the frame
+      gl.readPixels(0, rows ? rows[0] : 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px); // waits for the frame
     }
     return performance.now() - t0;
   }

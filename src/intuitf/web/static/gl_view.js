@@ -82,6 +82,7 @@ async function load(id, my) {
     if (my !== ticket) return;
     stats.loadMs[id] = Math.round(performance.now() - vol.started);
     attrCache = { key: "", attr: null };
+    msPerPx = null;
     vol.status = "ready";
     vol.note =
       data.step > 1
@@ -127,6 +128,45 @@ export function draw(ctx, { tf, camera, size, shading, background, quality }) {
     while (level < DRAG_SCALES.length - 1 && perPx * (size * DRAG_SCALES[level]) ** 2 > DRAG_BUDGET_MS) level++;
     dragLevel = level;
   }
+  return finish(quality, ms, side, size);
+}
+
+/** Software only: a full frame expected to take longer than this is drawn in bands, the
+ * page answering between them (a newer frame stops an older one's bands). */
+export const BAND_MS = 120;
+let msPerPx = null;
+
+/** Whether a frame of `quality` at size² should be drawn in bands (software, slow frames). */
+export function banded(quality, size) {
+  return !!R && R.software && quality === "full" && msPerPx !== null && msPerPx * size * size > 1.5 * BAND_MS;
+}
+
+/**
+ * Draw a full frame in horizontal bands, yielding to the page between them; each band shows
+ * as soon as it is drawn. `stale()` → true stops it (resolves null). Resolves like draw().
+ */
+export async function drawBanded(ctx, { tf, camera, size, shading, background }, stale) {
+  const n = Math.min(32, Math.ceil((msPerPx * size * size) / BAND_MS));
+  const step = Math.ceil(size / n);
+  let ms = 0;
+  if (R.canvas.width !== size || R.canvas.height !== size) {
+    R.canvas.width = size;
+    R.canvas.height = size;
+  }
+  const sx = ctx.canvas.width / size;
+  for (let y0 = 0; y0 < size; y0 += step) {
+    const y1 = Math.min(size, y0 + step);
+    ms += R.render({ tf, camera, width: size, height: size, shading, background, rows: [y0, y1] });
+    // GL rows count from the bottom; the canvas's from the top.
+    ctx.drawImage(R.canvas, 0, size - y1, size, y1 - y0, 0, (size - y1) * sx, ctx.canvas.width, (y1 - y0) * sx);
+    await new Promise((r) => setTimeout(r, 0));
+    if (stale()) return null;
+  }
+  return finish("full", ms, size, size);
+}
+
+function finish(quality, ms, side, size) {
+  msPerPx = msPerPx === null ? ms / (side * side) : 0.5 * msPerPx + (0.5 * ms) / (side * side);
   stats.frames += 1;
   stats.last = { quality, ms: Math.round(ms * 10) / 10, width: side, height: side };
   if (vol.id && stats.firstPicture[vol.id] === undefined) {

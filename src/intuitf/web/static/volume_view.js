@@ -230,13 +230,26 @@ function pageFrame(quality) {
   if (first) requestAnimationFrame(drawPageFrame);
 }
 
+let bandTicket = 0;
+
 function drawPageFrame() {
   const quality = glPending || "full";
   glPending = null;
   const gt = pageTarget(target());
   if (!gt || !glv.ready(gt.volume)) return frame(quality);
   const camera = cameraJSON();
-  const res = glv.draw(ctx, { tf: gt.tf, camera, size: viewSize, shading: state.shaded, background: hexToRgb(state.background), quality });
+  const my = ++bandTicket; // a newer frame stops an older one drawn in bands
+  const opts = { tf: gt.tf, camera, size: viewSize, shading: state.shaded, background: hexToRgb(state.background), quality };
+  if (glv.banded(quality, viewSize)) {
+    glv.drawBanded(ctx, opts, () => my !== bandTicket).then((res) => {
+      if (res && my === bandTicket) pageFrameDone(res, quality, gt, camera);
+    });
+    return;
+  }
+  pageFrameDone(glv.draw(ctx, opts), quality, gt, camera);
+}
+
+function pageFrameDone(res, quality, gt, camera) {
   setBusy(false);
   frameCount += 1;
   canvas.dataset.quality = quality;
