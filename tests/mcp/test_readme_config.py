@@ -22,6 +22,8 @@ from mcp import Client, StdioServerParameters
 
 README = Path(__file__).resolve().parents[2] / "README.md"
 
+pytestmark = pytest.mark.slow  # each starts a server process
+
 
 def _entry() -> dict:
     text = README.read_text(encoding="utf-8")

@@ -11,7 +11,7 @@ from mcp_util import call, make_config, wait_run_end
 
 from mcp import Client
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.timeout(300), pytest.mark.slow]
 
 SETTINGS = {"population": 6, "generations": 2, "image_size": 32, "output_size": 32, "seed": 4}
 

@@ -196,6 +196,7 @@ def test_scenario_in_memory(folders, fake_model):
     assert len(seen["runs"]) == 3
 
 
+@pytest.mark.slow
 def test_scenario_over_stdio(folders, fake_model):
     async def main():
         async with Client(stdio_params(folders)) as client:
