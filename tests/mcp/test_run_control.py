@@ -126,7 +126,19 @@ def test_a_client_leaving_stops_its_runs_cleanly_and_a_new_server_continues_them
             vid = (await call(client, "open_volume", path="phantom", max_dim=32))["id"]
             run = (await call(client, "start_run", volume=vid, intent="white bone",
                               judge="metric", settings=long))["run"]  # fmt: skip
-            got = await call(client, "wait_for_generation", run=run, timeout_s=120)
+            # A wait does not hold up the other tools: with the run paused, a wait is pending
+            # while status and a picture are answered; going on ends the wait.
+            await call(client, "pause_run", run=run)
+            # A generation whose last match was already judged still ends: let it.
+            await call(client, "wait_for_generation", run=run, timeout_s=1.5)
+            waiting = asyncio.create_task(
+                call(client, "wait_for_generation", run=run, timeout_s=120)
+            )
+            await call(client, "run_status", run=run)
+            await call(client, "render", volume=vid, size=48)
+            assert not waiting.done()
+            await call(client, "continue_run", run=run)
+            got = await waiting
             assert got["outcome"] == "generation_ended" and got["live"]
             return run
 
