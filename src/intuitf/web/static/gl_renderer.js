@@ -300,14 +300,38 @@ export class GLVolumeRenderer {
    * Each Gaussian's part of every pixel's opacity: Float32Array (N × height × width), rows
    * top to bottom, as the server's SampleCache.attribution. Null without float targets.
    */
-  attribution({ tf, camera, width, height, sampleDistance = DEFAULTS.sampleDistance }) {
+  attribution(opts) {
+    const job = this._attrBegin(opts);
+    if (!job) return null;
+    this._attrBand(job, 0, opts.height);
+    return this._attrEnd(job);
+  }
+
+  /**
+   * attribution() drawn in `bands` horizontal bands, yielding to the page between them (other
+   * drawing may happen meanwhile). `stale()` → true abandons it (resolves null).
+   */
+  async attributionBanded(opts, bands, stale) {
+    const job = this._attrBegin(opts);
+    if (!job) return null;
+    const step = Math.ceil(opts.height / bands);
+    for (let y0 = 0; y0 < opts.height; y0 += step) {
+      this._attrBand(job, y0, Math.min(opts.height, y0 + step));
+      await new Promise((r) => setTimeout(r, 0));
+      if (stale()) {
+        this._attrEnd(job);
+        return null;
+      }
+    }
+    return this._attrEnd(job);
+  }
+
+  _attrBegin({ tf, camera, width, height, sampleDistance = DEFAULTS.sampleDistance }) {
     const gl = this.gl;
     if (!this.floatTargets) return null;
     const ng = Math.min(16, tf.gaussians.length);
     const targets = Math.ceil(ng / 4);
     if (!this.progAttr[targets]) this.progAttr[targets] = program(gl, VERTEX, attributeSource(targets));
-    this._useTF(tf, sampleDistance);
-    const prog = this.progAttr[targets];
     const gMean = new Float32Array(16);
     const gWidth = new Float32Array(16).fill(1);
     const gHeight = new Float32Array(16);
@@ -327,33 +351,54 @@ export class GLVolumeRenderer {
       gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0 + i, gl.TEXTURE_2D, t, 0);
       texs.push(t);
     }
-    gl.drawBuffers(texs.map((_, i) => gl.COLOR_ATTACHMENT0 + i));
-    // After the targets are made: _common binds the LUT to texture unit 2, which making a
-    // target (bindTexture on the active unit) would replace.
-    this._common(prog, { camera, width, height, sampleDistance });
-    gl.uniform4fv(prog.u.u_mean, gMean);
-    gl.uniform4fv(prog.u.u_width, gWidth);
-    gl.uniform4fv(prog.u.u_height, gHeight);
-    gl.viewport(0, 0, width, height);
-    gl.drawArrays(gl.TRIANGLES, 0, 3);
+    gl.bindFramebuffer(gl.FRAMEBUFFER, null);
     const out = new Float32Array(ng * width * height);
-    const px = new Float32Array(width * height * 4);
+    return { tf, camera, width, height, sampleDistance, ng, targets, gMean, gWidth, gHeight, fb, texs, out };
+  }
+
+  /** Rows [y0, y1) (from the bottom) of an attribution job: drawn, read back into job.out. */
+  _attrBand(job, y0, y1) {
+    const gl = this.gl;
+    const { width, height, ng, targets } = job;
+    this._useTF(job.tf, job.sampleDistance);
+    const prog = this.progAttr[targets];
+    gl.bindFramebuffer(gl.FRAMEBUFFER, job.fb);
+    gl.drawBuffers(job.texs.map((_, i) => gl.COLOR_ATTACHMENT0 + i));
+    // _common binds the LUT to texture unit 2 (after the targets exist: making a target binds
+    // it on the active unit).
+    this._common(prog, { camera: job.camera, width, height, sampleDistance: job.sampleDistance });
+    gl.uniform4fv(prog.u.u_mean, job.gMean);
+    gl.uniform4fv(prog.u.u_width, job.gWidth);
+    gl.uniform4fv(prog.u.u_height, job.gHeight);
+    gl.viewport(0, 0, width, height);
+    gl.enable(gl.SCISSOR_TEST);
+    gl.scissor(0, y0, width, y1 - y0);
+    gl.drawArrays(gl.TRIANGLES, 0, 3);
+    gl.disable(gl.SCISSOR_TEST);
+    const rows = y1 - y0;
+    const px = new Float32Array(width * rows * 4);
     for (let t = 0; t < targets; t++) {
       gl.readBuffer(gl.COLOR_ATTACHMENT0 + t);
-      gl.readPixels(0, 0, width, height, gl.RGBA, gl.FLOAT, px);
+      gl.readPixels(0, y0, width, rows, gl.RGBA, gl.FLOAT, px);
       for (let c = 0; c < 4 && t * 4 + c < ng; c++) {
-        const plane = out.subarray((t * 4 + c) * width * height, (t * 4 + c + 1) * width * height);
-        for (let y = 0; y < height; y++) {
-          const src = (height - 1 - y) * width * 4;
-          for (let x = 0; x < width; x++) plane[y * width + x] = px[src + x * 4 + c];
+        const plane = job.out.subarray((t * 4 + c) * width * height, (t * 4 + c + 1) * width * height);
+        for (let r = 0; r < rows; r++) {
+          const src = (rows - 1 - r) * width * 4; // GL row y1-1-r is picture row height-y1+r
+          const dst = (height - y1 + r) * width;
+          for (let x = 0; x < width; x++) plane[dst + x] = px[src + x * 4 + c];
         }
       }
     }
     gl.bindFramebuffer(gl.FRAMEBUFFER, null);
-    gl.deleteFramebuffer(fb);
-    texs.forEach((t) => gl.deleteTexture(t));
-    return out;
   }
+
+  _attrEnd(job) {
+    const gl = this.gl;
+    gl.deleteFramebuffer(job.fb);
+    job.texs.forEach((t) => gl.deleteTexture(t));
+    return job.out;
+  }
+
 }
 
 /** A feature counts as visible at a pixel with at least this share (session/views.py). */

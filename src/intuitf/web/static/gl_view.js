@@ -138,7 +138,8 @@ let msPerPx = null;
 
 /** Whether a frame of `quality` at size² should be drawn in bands (software, slow frames). */
 export function banded(quality, size) {
-  return !!R && R.software && quality === "full" && msPerPx !== null && msPerPx * size * size > 1.5 * BAND_MS;
+  // Unknown cost (a volume's first frame): in bands, to be safe.
+  return !!R && R.software && quality === "full" && (msPerPx === null || msPerPx * size * size > 1.5 * BAND_MS);
 }
 
 /**
@@ -146,7 +147,7 @@ export function banded(quality, size) {
  * as soon as it is drawn. `stale()` → true stops it (resolves null). Resolves like draw().
  */
 export async function drawBanded(ctx, { tf, camera, size, shading, background }, stale) {
-  const n = Math.min(32, Math.ceil((msPerPx * size * size) / BAND_MS));
+  const n = msPerPx === null ? 16 : Math.min(32, Math.ceil((msPerPx * size * size) / BAND_MS));
   const step = Math.ceil(size / n);
   let ms = 0;
   if (R.canvas.width !== size || R.canvas.height !== size) {
@@ -178,9 +179,16 @@ function finish(quality, ms, side, size) {
   return { ms, width: side, height: side, reduced: side < size };
 }
 
+function attrKey(tf, camera, size) {
+  return JSON.stringify([vol.id, tfKey(tf), camera, size]);
+}
+
+let prepTicket = 0;
+
 function attribution(tf, camera, size) {
-  const key = JSON.stringify([vol.id, tfKey(tf), camera, size]);
+  const key = attrKey(tf, camera, size);
   if (attrCache.key !== key) {
+    prepTicket += 1; // a pass in bands for another view is no longer wanted
     stats.attributionPasses = (stats.attributionPasses || 0) + 1;
     stats.lastAttributionKey = key;
     const attr = R.attribution({ tf, camera, width: size, height: size });
@@ -193,10 +201,22 @@ function attribution(tf, camera, size) {
  * Compute the attribution for a view ahead of a click (after the view settles), so a click
  * finds it ready: the outline then follows within the frame.
  */
-export function prepare(tf, camera, size) {
+export async function prepare(tf, camera, size) {
   if (!canPick()) return;
+  const key = attrKey(tf, camera, size);
+  if (attrCache.key === key) return;
+  const my = ++prepTicket;
   const t0 = performance.now();
-  attribution(tf, camera, size);
+  let attr;
+  if (R.software) {
+    // In bands, the page answering between them (a click meanwhile makes its own pass).
+    const bands = msPerPx === null ? 16 : Math.min(32, Math.max(1, Math.ceil((msPerPx * size * size) / BAND_MS)));
+    attr = await R.attributionBanded({ tf, camera, width: size, height: size }, bands, () => my !== prepTicket);
+    if (!attr || my !== prepTicket) return;
+  } else attr = R.attribution({ tf, camera, width: size, height: size });
+  stats.attributionPasses = (stats.attributionPasses || 0) + 1;
+  stats.lastAttributionKey = key;
+  attrCache = { key, attr };
   stats.prepared = { ms: Math.round(performance.now() - t0), size };
 }
 
