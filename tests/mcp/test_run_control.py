@@ -16,9 +16,22 @@ pytestmark = [pytest.mark.timeout(300), pytest.mark.slow]
 SETTINGS = {"population": 6, "generations": 2, "image_size": 32, "output_size": 32, "seed": 4}
 
 
-def test_pause_continue_budget_and_cancel(folders, fake_model):
+@pytest.fixture
+def slow_model():
+    """A model server slow enough (0.3 s a verdict) that a pause lands mid-generation."""
+    import numpy as np
+
+    from intuitf.testing.fake_mllm import FakeMLLMServer
+
+    with FakeMLLMServer(score=lambda img: float(np.asarray(img, np.float64).mean()),
+                        latency=0.3, seed=5) as srv:  # fmt: skip
+        yield srv
+
+
+def test_pause_continue_budget_and_cancel(folders, slow_model):
     from intuitf.mcp import build_server
 
+    fake_model = slow_model
     # The server's default budget applies to model-judged runs that bring none of their own.
     server, _ = build_server(make_config(folders, budget_calls=5))
 
