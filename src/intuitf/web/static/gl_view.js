@@ -147,7 +147,7 @@ export function banded(quality, size) {
  * as soon as it is drawn. `stale()` → true stops it (resolves null). Resolves like draw().
  */
 export async function drawBanded(ctx, { tf, camera, size, shading, background }, stale) {
-  const n = msPerPx === null ? 16 : Math.min(32, Math.ceil((msPerPx * size * size) / BAND_MS));
+  const n = msPerPx === null ? 32 : Math.min(32, Math.ceil((msPerPx * size * size) / BAND_MS));
   const step = Math.ceil(size / n);
   let ms = 0;
   if (R.canvas.width !== size || R.canvas.height !== size) {
@@ -210,7 +210,7 @@ export async function prepare(tf, camera, size) {
   let attr;
   if (R.software) {
     // In bands, the page answering between them (a click meanwhile makes its own pass).
-    const bands = msPerPx === null ? 16 : Math.min(32, Math.max(1, Math.ceil((msPerPx * size * size) / BAND_MS)));
+    const bands = msPerPx === null ? 32 : Math.min(32, Math.max(1, Math.ceil((msPerPx * size * size) / BAND_MS)));
     attr = await R.attributionBanded({ tf, camera, width: size, height: size }, bands, () => my !== prepTicket);
     if (!attr || my !== prepTicket) return;
   } else attr = R.attribution({ tf, camera, width: size, height: size });
