@@ -360,7 +360,20 @@ def create_app(
     async def _http(request: Request, exc: StarletteHTTPException):
         detail = exc.detail if isinstance(exc.detail, str) else "Request refused."
         headers = getattr(exc, "headers", None)
+        if exc.status_code == 405:  # Allow names every method of the path, not one route's
+            headers = {**(headers or {}), "Allow": ", ".join(_methods_of(request))}
         return JSONResponse({"detail": detail}, status_code=exc.status_code, headers=headers)
+
+    def _methods_of(request: Request) -> list[str]:
+        """The methods the schema declares for the request's path."""
+        import re
+
+        methods: set[str] = set()
+        for template, ops in app.openapi().get("paths", {}).items():
+            pattern = "^" + re.sub(r"\\\{[^}]+\\\}", "[^/]+", re.escape(template)) + "$"
+            if re.match(pattern, request.url.path):
+                methods |= {m.upper() for m in ops}
+        return sorted(methods) or ["GET"]
 
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception):  # pragma: no cover - a bug

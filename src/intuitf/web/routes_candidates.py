@@ -28,8 +28,9 @@ from intuitf.web.common import (
     tf_of,
     user_error,
 )
+from intuitf.web.schema import COMMON
 
-router = APIRouter(prefix="/api", tags=["candidates"])
+router = APIRouter(prefix="/api", tags=["candidates"], responses=COMMON)
 
 PNG = {200: {"content": {"image/png": {}}, "description": "A PNG picture."}}
 

@@ -6,8 +6,9 @@ from fastapi import APIRouter, Request
 from pydantic import BaseModel
 
 from intuitf.web.common import state
+from intuitf.web.schema import COMMON
 
-router = APIRouter(prefix="/api", tags=["info"])
+router = APIRouter(prefix="/api", tags=["info"], responses=COMMON)
 
 
 class Info(BaseModel):

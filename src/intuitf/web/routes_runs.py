@@ -23,8 +23,9 @@ from intuitf.web.common import (
     user_error,
 )
 from intuitf.web.runs import LiveSession, NotLive
+from intuitf.web.schema import COMMON
 
-router = APIRouter(prefix="/api", tags=["runs"])
+router = APIRouter(prefix="/api", tags=["runs"], responses=COMMON)
 
 
 # -- request bodies ----------------------------------------------------------------------------

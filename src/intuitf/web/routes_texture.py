@@ -34,8 +34,9 @@ from fastapi import APIRouter, Query, Request
 from fastapi.responses import Response
 
 from intuitf.web.common import ApiError, state
+from intuitf.web.schema import COMMON
 
-router = APIRouter(prefix="/api", tags=["volumes"])
+router = APIRouter(prefix="/api", tags=["volumes"], responses=COMMON)
 
 #: Version of the byte layout: part of the ETag, so a change never meets a stale browser copy.
 LAYOUT_VERSION = 1

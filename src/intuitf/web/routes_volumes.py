@@ -28,9 +28,10 @@ from intuitf.web.routes_candidates import (
     feature_tiles,
     pick_result,
 )
+from intuitf.web.schema import COMMON
 from intuitf.web.security import TOO_LARGE_HINT, too_large
 
-router = APIRouter(prefix="/api", tags=["volumes"])
+router = APIRouter(prefix="/api", tags=["volumes"], responses=COMMON)
 
 PNG = {200: {"content": {"image/png": {}}, "description": "A PNG picture."}}
 
