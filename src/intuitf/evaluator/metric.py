@@ -458,14 +458,20 @@ def _clause_presence(f: _Features, name: str, mod: str | None) -> float:
     if pix.shape[0] == 0:
         return 0.0
     target = _named_lab([name])[0]
-    if mod in (None, "opaque") or np.hypot(target[1], target[2]) < 12:
+    near = np.linalg.norm(pix - target, axis=1) < _NAMED_DELTA_E
+    if np.hypot(target[1], target[2]) < 12:
         # Achromatic colours (white, ivory, grey) have no hue to follow: match them directly.
-        near = np.linalg.norm(pix - target, axis=1) < _NAMED_DELTA_E
         return _saturating(near.mean(), _CLAUSE_SATURATION)
     hue = np.arctan2(pix[:, 2], pix[:, 1])
     chroma = np.hypot(pix[:, 1], pix[:, 2])
     t_hue = np.arctan2(target[2], target[1])
     dh = np.abs(np.angle(np.exp(1j * (hue - t_hue))))
+    if mod in (None, "opaque"):
+        # On the colour, or clearly of its hue (a solid part seen through a translucent layer
+        # keeps its hue but not its lightness): the latter counts a little over half.
+        hued = (dh < np.radians(30)) & (chroma > 20)
+        return max(_saturating(near.mean(), _CLAUSE_SATURATION),
+                   HUE_CREDIT * _saturating(hued.mean(), _CLAUSE_SATURATION))  # fmt: skip
     tinted = (dh < np.radians(30)) & (chroma > 8)
     if mod == "faint":
         # A faint layer lets the background through: darker (over a dark background) or
@@ -530,6 +536,9 @@ def _edit_region(intent: Intent, shape: tuple[int, int]) -> np.ndarray | None:
     mask, _ = _strokes(intent, shape)
     return mask
 
+
+#: Share of the score an opaque colour gets from pixels merely of its hue (not within ΔE 25).
+HUE_CREDIT = 0.6
 
 #: Text alignment kept when the picture's silhouette is the volume's box (a painted box).
 BOX_TEXT_PENALTY = 0.35
