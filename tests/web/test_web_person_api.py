@@ -493,3 +493,13 @@ def test_history_thumbnails_point_at_pictures_that_exist(client):
         for g in node["generations"]:
             if g["thumbnail"]:
                 assert client.get(g["thumbnail"]).status_code == 200
+
+
+# -- 15: features are labelled with the volume's structures --------------------------------------
+def test_volume_structures_label_the_features(client):
+    r = client.get("/api/volumes/phantom/structures")
+    assert r.status_code == 200, r.text
+    parts = r.json()
+    assert parts and all(0 <= p["value_range"][0] <= p["value_range"][1] <= 1 for p in parts)
+    assert all(p["shape"] and p["position"] for p in parts)
+    assert client.get("/api/volumes/nope/structures").status_code == 404

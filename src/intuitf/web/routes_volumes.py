@@ -139,6 +139,25 @@ def _runs_of_source(web, source: str) -> list[str]:
     return out
 
 
+class StructureOut(BaseModel):
+    id: int
+    name: str | None
+    shape: str
+    position: str
+    outer: bool
+    share: float
+    value_range: list[float]
+
+
+@router.get("/volumes/{volume_id}/structures", response_model=list[StructureOut])
+async def structures(request: Request, volume_id: str) -> list[dict]:
+    """The volume's structures (its materials split into 3-D parts, with the names a model
+    gave them where it did): what the Features view labels each feature with."""
+    web = state(request)
+    entry = web.catalog.get(volume_id)
+    return await asyncio.to_thread(web.catalog.structures, entry.id)
+
+
 @router.get("/volumes/{volume_id}/histogram", response_model=Histogram)
 async def histogram(request: Request, volume_id: str) -> dict:
     web = state(request)

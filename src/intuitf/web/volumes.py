@@ -104,6 +104,7 @@ class VolumeCatalog:
         self._loaded: OrderedDict[str, Any] = OrderedDict()
         self._load_locks: dict[str, threading.Lock] = {}
         self._histograms: dict[str, dict] = {}
+        self._structures: dict[str, list[dict]] = {}
         self._add(
             VolumeEntry(
                 "phantom", "phantom", "builtin:phantom", "builtin", {}, [96, 96, 96], "uint8"
@@ -262,6 +263,26 @@ class VolumeCatalog:
         }
         with self._lock:
             self._histograms[volume_id] = out
+        return out
+
+    def structures(self, volume_id: str) -> list[dict]:
+        """The foreground structures of a volume (kept per volume; blocking)."""
+        with self._lock:
+            got = self._structures.get(volume_id)
+        if got is not None:
+            return got
+        from intuitf.intent.hints import structure_map_of
+
+        # The map runs of this volume use (named by a model where one named its parts).
+        smap = structure_map_of(self.load(volume_id))
+        out = [
+            {"id": s.id, "name": s.name, "shape": s.shape, "position": s.position,
+             "outer": s.outer, "share": float(s.share),
+             "value_range": [float(s.value_range[0]), float(s.value_range[1])]}
+            for s in smap.foreground()
+        ]  # fmt: skip
+        with self._lock:
+            self._structures[volume_id] = out
         return out
 
     # -- uploads --------------------------------------------------------------------------

@@ -4,7 +4,7 @@
 
 import * as api from "./api.js";
 import { showError } from "./messages.js";
-import { el, hexToRgb, on, rgbToHex, set, shownTF, splitQid, state } from "./state.js";
+import { el, hexToRgb, on, rgbToHex, runVolumeId, set, shownTF, splitQid, state } from "./state.js";
 import { pageFeatures } from "./volume_view.js";
 
 const TILE = 128;
@@ -23,6 +23,7 @@ export function initFeatures() {
   clearBtn.addEventListener("click", () => set({ selected: new Set() }));
   on(["candidate", "viewSettled", "shaded", "background", "histogram", "run", "volumeId"], schedule);
   on(["selected"], markSelection);
+  on(["run", "runDetail", "volumeId"], loadStructures);
   render([]);
 }
 
@@ -80,9 +81,51 @@ async function load() {
   }
 }
 
+// -- what each feature is: the volume's structure its values fall on, and its near-twins -------
+let structures = { volume: null, list: [] };
+
+async function loadStructures() {
+  const id = state.run ? runVolumeId() : state.volumeId;
+  if (!id || structures.volume === id) return;
+  structures = { volume: id, list: [] };
+  try {
+    const list = await api.get(`/api/volumes/${api.enc(id)}/structures`);
+    if (structures.volume !== id) return;
+    structures = { volume: id, list };
+    shownKey = "";
+    schedule();
+  } catch (_) {
+    /* the labels are a help: without them each feature keeps its number and value */
+  }
+}
+
+/** The structure a Gaussian at `mean` shows: its name where a model gave one, else what it
+ * looks like and where it is ("blob, bottom"). */
+export function structureLabel(mean, list = structures.list) {
+  const hits = (list || []).filter((s) => s.value_range[0] - 0.02 <= mean && mean <= s.value_range[1] + 0.02);
+  if (!hits.length) return null;
+  const s = hits.reduce((a, b) => (b.share > a.share ? b : a));
+  return s.name || `${s.shape}, ${s.position}`;
+}
+
+/** For each Gaussian, the lower-numbered one it nearly repeats (overlapping values, close
+ * colours), or -1: such twins show the same structure twice. */
+export function nearTwins(gaussians) {
+  return gaussians.map((g, i) => {
+    for (let j = 0; j < i; j++) {
+      const o = gaussians[j];
+      const close = Math.abs(g.mean - o.mean) < 0.5 * (g.width + o.width);
+      const dc = Math.max(...[0, 1, 2].map((k) => Math.abs((g.color || [])[k] - (o.color || [])[k])));
+      if (close && dc < 0.25) return j;
+    }
+    return -1;
+  });
+}
+
 function render(feats) {
   const src = source();
   const tf = src && src.tf;
+  const twins = tf ? nearTwins(tf.gaussians) : [];
   if (!feats.length || !tf) {
     strip.replaceChildren(el("p.empty", { text: tf ? "Rendering each feature alone…" : "Each feature of the current result appears here on its own." }));
     markSelection();
@@ -91,12 +134,14 @@ function render(feats) {
   strip.replaceChildren(
     ...feats.map((f) => {
       const g = tf.gaussians[f.index] || {};
+      const what = structureLabel(g.mean ?? 0);
+      const twin = twins[f.index] ?? -1;
       return el(
-        "button.feature",
+        `button.feature${twin >= 0 ? ".twin" : ""}`,
         {
           type: "button",
-          dataset: { index: String(f.index) },
-          title: `Feature ${f.index + 1}: mean ${(g.mean ?? 0).toFixed(3)}, width ${(g.width ?? 0).toFixed(3)}, height ${(g.height ?? 0).toFixed(2)}${g.frozen ? " (frozen)" : ""}`,
+          dataset: { index: String(f.index), structure: what || "", twin: twin >= 0 ? String(twin) : "" },
+          title: `Feature ${f.index + 1}${what ? ` (${what})` : ""}: mean ${(g.mean ?? 0).toFixed(3)}, width ${(g.width ?? 0).toFixed(3)}, height ${(g.height ?? 0).toFixed(2)}${g.frozen ? " (frozen)" : ""}${twin >= 0 ? `; nearly the same as feature ${twin + 1}` : ""}`,
           "aria-pressed": "false",
           on: { click: () => toggle(f.index) },
         },
@@ -106,6 +151,8 @@ function render(feats) {
           {},
           el("span.swatch", { style: { background: rgbToHex(g.color || [0.5, 0.5, 0.5]) } }),
           `${f.index + 1}`,
+          what ? el("span.feature-name", { text: what }) : null,
+          twin >= 0 ? el("span.feature-twin", { text: `≈${twin + 1}` }) : null,
           el("span.feature-val", { text: `@${(g.mean ?? 0).toFixed(2)}` }),
         ),
       );
