@@ -503,3 +503,22 @@ def test_volume_structures_label_the_features(client):
     assert parts and all(0 <= p["value_range"][0] <= p["value_range"][1] <= 1 for p in parts)
     assert all(p["shape"] and p["position"] for p in parts)
     assert client.get("/api/volumes/nope/structures").status_code == 404
+
+
+# -- 16: Export PNG of the view on screen ----------------------------------------------------------
+def test_export_png_of_the_current_view(client):
+    import json
+
+    name = _start(client, generations=1)
+    qid = wait_run(client, name)["gallery"][0]["qid"]
+    run, cid = qid.split("/")
+    judging = client.get(f"/api/export/{run}/{cid}?to=png&size=64")
+    assert judging.status_code == 200 and judging.headers["content-type"] == "image/png"
+    cam = json.dumps({"azimuth": 120, "elevation": -30, "zoom": 1.5, "pan": [0, 0]})
+    turned = client.get(f"/api/export/{run}/{cid}", params={"to": "png", "size": 64, "camera": cam})
+    assert turned.status_code == 200 and turned.content != judging.content
+    bad = client.get(f"/api/export/{run}/{cid}", params={"to": "png", "camera": "{zoom"})
+    assert bad.status_code == 422 and bad.json()["detail"]
+    far = client.get(f"/api/export/{run}/{cid}",
+                     params={"to": "png", "camera": json.dumps({"zoom": 1e308})})  # fmt: skip
+    assert far.status_code == 422
