@@ -186,6 +186,7 @@ def test_the_batch_report_is_self_contained_with_undecided_figures(batch_inputs,
         write_result(root, {"key": key, "label": key, "source": f"/v/{key}.npy",
                             "status": "completed", "similarity": 0.9 - i / 2, "calls": 50,
                             "matches": matches, "undecided": undecided,
+                            "indistinct_generations": [1] if i else [],
                             "best_png": f"runs/{key}/best/rank01.png", "run_dir": "x"})  # fmt: skip
         items.append(VolumeItem(key, f"/v/{key}.npy", key))
     summary = build_summary(root, items, {})
@@ -196,6 +197,7 @@ def test_the_batch_report_is_self_contained_with_undecided_figures(batch_inputs,
     assert len(srcs) == 4  # the reference, two bests, the contact sheet
     assert all(s.startswith("data:image/png;base64,") for s in srcs)
     assert "9 of 30 (30 %)" in page and "9 of 70 matches (13 %)" in page
+    assert "generation 1: the judge could not tell the candidates apart" in page
     sheet = load_image(paths["contact_sheet"])
     assert sheet.shape[1] >= 3 * 320  # three tiles of 320 pixels side by side
 

@@ -415,13 +415,16 @@ def _match_figures(run_dir: Path) -> dict:
     from intuitf.session.rundir import RunDirectory
 
     try:
-        stats = MatchStats.from_journal(RunDirectory(run_dir).generations())
+        gens = RunDirectory(run_dir).generations()
+        stats = MatchStats.from_journal(gens)
     except Exception:  # noqa: BLE001 - figures for the report, never a failure
         return {}
     return {
         "matches": stats.matches,
         "undecided": stats.undecided,
         "undecided_share": stats.undecided_share,
+        # Generations in which the judge called every decided match a tie.
+        "indistinct_generations": [int(e["generation"]) for e in gens if e.get("indistinct")],
     }
 
 

@@ -193,6 +193,15 @@ def _undecided_cell(v: dict) -> str:
     return f"{n} of {m} ({100 * n / m:.0f} %)" if m else "–"
 
 
+def _indistinct_note(v: dict) -> str:
+    """A sentence when the judge could not tell a generation's candidates apart."""
+    gens = v.get("indistinct_generations") or []
+    if not gens:
+        return ""
+    which = ", ".join(str(int(g)) for g in gens)
+    return f"generation {which}: the judge could not tell the candidates apart"
+
+
 def report_html(summary: dict, root: Path | None = None, sheet: np.ndarray | None = None) -> str:
     """A self-contained page: the pictures (reference, each volume's best, the contact sheet)
     are inside it, read from the batch folder ``root``; links go to each run's own report."""
@@ -222,7 +231,8 @@ def report_html(summary: dict, root: Path | None = None, sheet: np.ndarray | Non
             f"<td>${_fmt(v.get('cost_usd'), '.4f', '0')}</td>"
             f"<td>{_fmt(v.get('seconds'), '.1f')}</td>"
             f"<td>{_fmt(v.get('render_s'), '.1f')} / {_fmt(v.get('judge_s'), '.1f')}</td>"
-            f"<td>{html.escape(v.get('flag') or '')}<br><small>{html.escape(str(v.get('message') or ''))[:300]}</small></td>"
+            f"<td>{html.escape(v.get('flag') or '')}<br><small>{html.escape(str(v.get('message') or ''))[:300]}"
+            f"{'<br>' + html.escape(_indistinct_note(v)) if _indistinct_note(v) else ''}</small></td>"
             f"<td>{report}</td></tr>"
         )
     budget = summary.get("budget") or {}
