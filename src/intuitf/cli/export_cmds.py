@@ -90,9 +90,9 @@ def register(app: typer.Typer) -> None:
         from intuitf.session.rundir import RunDirectory
 
         if not RunDirectory(run_dir).exists():
-            what = "does not exist" if not run_dir.exists() else "holds no run (no run.json)"
+            why = "it does not exist" if not run_dir.exists() else "it holds no run.json"
             raise IntuitfError(
-                f"{run_dir} {what}.",
+                f"{run_dir} is not a run folder ({why}).",
                 "Give a run folder written by `intuitf optimize` (or a batch's runs/KEY).",
             )
         path = build_report(run_dir)
