@@ -50,7 +50,7 @@ def test_figures_count_what_was_paid_across_a_kill(tmp_path, monkeypatch):
 
     rd = RunDirectory(run)
     raw = [e["generation"] for e in rd.read_journal() if e["type"] == "generation"]
-    assert raw == [0, 1, 1, 2]  # generation 1 was replayed after the kill
+    assert raw == [0, 1, 2]  # generation 1 was replayed after the kill: its entry replaced
     gens = rd.generations()
     assert [e["generation"] for e in gens] == [0, 1, 2]
     # The replayed generation's figures hold what its killed attempt paid (its answers are
@@ -60,3 +60,22 @@ def test_figures_count_what_was_paid_across_a_kill(tmp_path, monkeypatch):
     assert gens[1]["calls"] > 1
     history = RunStore(run.parent).history("r")
     assert sum(h["calls"] for h in history) == journal_calls
+
+
+def test_a_replayed_generation_replaces_its_journal_entries(tmp_path):
+    rd = RunDirectory(tmp_path)
+    rd.append_journal({"type": "run", "seed": 1})
+    rd.append_journal({"type": "generation", "generation": 0, "calls": 5})
+    rd.append_journal({"type": "verdict", "generation": 1, "a": 1})
+    rd.append_journal({"type": "generation", "generation": 1, "calls": 4})
+    rd.append_journal({"type": "generation", "generation": 2, "calls": 3})
+    before = rd.journal.read_bytes()
+    rd.append_journal({"type": "verdict", "generation": 3})  # no rewrite for other entries
+    assert rd.journal.read_bytes().startswith(before)
+
+    rd.append_journal({"type": "generation", "generation": 1, "calls": 9})  # replayed
+    entries = rd.read_journal()
+    assert [(e["type"], e.get("generation")) for e in entries] == [
+        ("run", None), ("generation", 0), ("verdict", 1), ("verdict", 3), ("generation", 1),
+    ]  # fmt: skip
+    assert entries[-1]["calls"] == 9

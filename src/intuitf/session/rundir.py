@@ -55,7 +55,8 @@ def atomic_write_json(path: Path, obj: Any) -> None:
 def latest_generations(entries: Iterable[dict]) -> list[dict]:
     """The "generation" entries of a journal, one per generation, in order.
 
-    A generation replayed after a resume appears twice in the journal; the last wins.
+    A journal written before replays replaced their earlier entry may hold a generation twice
+    (a generation replayed after a resume); the last wins.
     """
     by_gen: dict[int, dict] = {}
     for e in entries:
@@ -171,7 +172,16 @@ class RunDirectory:
             raise StorageError(f"{self.run_json} is unreadable or corrupt: {exc}.") from exc
 
     def append_journal(self, entry: dict) -> None:
-        """Append one line and fsync it: the journal is the run's memory."""
+        """Append one line and fsync it: the journal is the run's memory.
+
+        A "generation" entry for a generation the journal already holds (a generation replayed
+        after a kill between its journal entry and its checkpoint) replaces the earlier entries
+        of that generation and later ones, so the journal keeps one entry per generation. The
+        replayed entry carries everything paid since the last checkpoint, the killed attempt
+        included, so nothing paid drops out of the figures.
+        """
+        if entry.get("type") == "generation" and isinstance(entry.get("generation"), int):
+            self._drop_generations_from(entry["generation"])
         line = json.dumps(entry, separators=(",", ":")) + "\n"
         try:
             self.root.mkdir(parents=True, exist_ok=True)
@@ -183,6 +193,37 @@ class RunDirectory:
             if exc.errno == errno.ENOSPC:
                 raise _disk_full_error(self.journal, exc) from exc
             raise StorageError(f"Cannot append to {self.journal}: {exc.strerror or exc}.") from exc
+
+    def _drop_generations_from(self, generation: int) -> None:
+        """Rewrite the journal (atomically) without its "generation" entries numbered
+        ``generation`` or later; a no-op, with no rewrite, when it holds none."""
+        if not self.journal.exists():
+            return
+        try:
+            lines = self.journal.read_bytes().splitlines(keepends=True)
+        except OSError as exc:
+            raise StorageError(f"Cannot read {self.journal}: {exc.strerror or exc}.") from exc
+
+        def stale(line: bytes) -> bool:
+            if b'"generation"' not in line:
+                return False
+            try:
+                e = json.loads(line)
+            except (json.JSONDecodeError, UnicodeDecodeError):
+                return False
+            return (
+                isinstance(e, dict)
+                and e.get("type") == "generation"
+                and isinstance(e.get("generation"), int)
+                and e["generation"] >= generation
+            )
+
+        kept = [ln for ln in lines if not stale(ln)]
+        if len(kept) == len(lines):
+            return
+        if kept and not kept[-1].endswith(b"\n"):
+            kept[-1] += b"\n"  # a line cut short by a crash stays a line of its own
+        atomic_write_bytes(self.journal, b"".join(kept))
 
     def read_journal(self) -> list[dict]:
         """All complete entries; a line cut short by a crash is ignored."""
