@@ -169,7 +169,7 @@ def bench_cuda_config(vol, size, shading, tfs, args, peak, vtk_ok) -> dict:
     kw = dict(size=size, shading=shading, sample_distance=args.sample_distance)
     gpu = VolumeRenderer(vol, device="cuda", **kw)
     k = len(tfs)
-    row: dict = {"volume": vol.name, "size": size, "shading": shading}
+    row: dict = {"volume": vol.name, "dims": vol.dims, "size": size, "shading": shading}
     # Warm up: JIT (or the on-disk kernel cache), volume and gradient upload.
     t = time.perf_counter()
     gpu.render(tfs[0], cam)
@@ -211,7 +211,8 @@ def bench_cuda_config(vol, size, shading, tfs, args, peak, vtk_ok) -> dict:
     row["read_mb"] = float(read.mean()) / 1e6
     if peak:
         row["bw_floor_us"] = row["read_mb"] * 1e6 / (peak * 1e9) * 1e6
-        row["bw_pct"] = 100.0 * row["bw_floor_us"] / row["kernel_us"]
+        if row["kernel_us"] > 0:  # (the simulator's events time nothing)
+            row["bw_pct"] = 100.0 * row["bw_floor_us"] / row["kernel_us"]
     # The CPU path on this machine, and the agreement of the pictures.
     n_cpu = min(args.cpu_candidates, k)
     if n_cpu:
@@ -243,6 +244,21 @@ def bench_cuda_config(vol, size, shading, tfs, args, peak, vtk_ok) -> dict:
         row["vtk_gpu_ms"] = statistics.median(tv) * 1e3
         scene.close()
     return row
+
+
+def write_json(path: str | None, record: dict) -> None:
+    """Append ``record`` as one JSON line to ``path`` (--json), as soon as it is measured."""
+    if not path:
+        return
+    import json
+
+    def plain(v):
+        if isinstance(v, (tuple, list)):
+            return [plain(x) for x in v]
+        return v.item() if isinstance(v, np.generic) else v
+
+    with open(path, "a", encoding="utf-8") as f:
+        f.write(json.dumps({k: plain(v) for k, v in record.items()}) + "\n")
 
 
 def speedup(a: float, b: float) -> str:
@@ -286,14 +302,16 @@ def cuda_main(args) -> None:
     reason = cuda_unavailable_reason()
     if reason is not None:
         sys.exit(f"--device cuda: no usable NVIDIA GPU here ({reason}); nothing was measured.")
-    line, peak = gpu_facts()
-    peak = args.peak_bandwidth or peak
+    line, device_peak = gpu_facts()
+    peak = args.peak_bandwidth or device_peak
     from numba import cuda
 
     print(line)
     print(
         f"numba {numba.__version__}, numba.cuda {getattr(cuda, 'implementation', '?')}; "
-        f"peak memory bandwidth {f'{peak:.0f} GB/s' if peak else 'unknown (--peak-bandwidth)'};"
+        f"peak memory bandwidth {f'{peak:.0f} GB/s' if peak else 'unknown (--peak-bandwidth)'}"
+        f" (from the device's memory clock and bus: "
+        f"{f'{device_peak:.0f} GB/s' if device_peak else 'not reported'});"
         f" {os.cpu_count()} CPUs, numba {numba.get_num_threads()} threads"
     )
     vtk_ok = not args.no_vtk
@@ -336,6 +354,7 @@ def cuda_main(args) -> None:
             for size in sizes:
                 row = bench_cuda_config(vol, size, shading, tfs, args, peak, vtk_ok)
                 print_row(row)
+                write_json(args.json, {"kind": "render", "gpu": line, "peak_gbs": peak, **row})
                 rows.append(row)
     print(
         "\n| volume | picture | shading | ms/candidate (kernel µs) | build ms | new camera ms |"
@@ -358,6 +377,67 @@ def cuda_main(args) -> None:
     )
 
 
+def generation_main(args) -> None:
+    """A generation's rendering as ``intuitf optimize`` does it: a Session on the 256³ foot
+    (population ``--population``, judging pictures ``--gen-size``², shaded, the metric judge
+    against a fixed reference picture), timing the render jobs of each generation through
+    :meth:`Session.on_render` (the sample cache for the judging camera and the candidates'
+    pictures; on the GPU the population is one launch). Generation 0 includes the JIT and
+    the gradient; later ones are the steady state. Threads for the CPU path: set
+    ``NUMBA_NUM_THREADS`` (2 for the two-core comparison)."""
+    import numba
+
+    from intuitf.evaluator.types import Intent
+    from intuitf.render.device import select_device
+    from intuitf.session import RunSettings, Session
+
+    device = select_device(args.device)
+    vol = load_volume(DATA / "foot_zfp8lossy_256x256x256_uint8.raw.gz")
+    n = args.gen_size
+    yy, xx = np.mgrid[0:n, 0:n] / max(n - 1, 1)  # a smooth reference picture: the judge's input
+    reference = (np.stack([xx, yy, 0.5 * (xx + yy)], axis=-1) * 255).astype(np.uint8)
+    settings = RunSettings(
+        population=args.population,
+        generations=args.generations,
+        image_size=n,
+        shading=True,
+        device=device,
+        seed=1,
+    )
+    session = Session.create(
+        vol, intent=Intent(kind="image", reference=reference), settings=settings
+    )
+    jobs: list[float] = []
+    session.on_render(jobs.append)
+    threads = numba.get_num_threads()
+    print(
+        f"generation timing: device {device}, foot {vol.dims}, population {args.population},"
+        f" {n}² shaded; numba {threads} CPU threads"
+    )
+    try:
+        for g in range(args.generations):
+            jobs.clear()
+            t = time.perf_counter()
+            session.step()
+            wall = time.perf_counter() - t
+            render = sum(jobs)
+            print(
+                f"generation {g}: rendering {render * 1e3:.1f} ms in {len(jobs)} jobs"
+                f" ({render / args.population * 1e3:.2f} ms/candidate), whole step {wall:.2f} s",
+                flush=True,
+            )
+            write_json(
+                args.json,
+                {
+                    "kind": "generation", "device": device, "generation": g,
+                    "population": args.population, "size": n, "threads": threads,
+                    "render_ms": render * 1e3, "jobs": len(jobs), "step_s": wall,
+                },
+            )  # fmt: skip
+    finally:
+        session.close()
+
+
 def ptx_report(arch: str) -> None:
     """Compile every CUDA kernel for ``arch`` (no GPU needed) and print registers and spills."""
     import re
@@ -365,6 +445,9 @@ def ptx_report(arch: str) -> None:
     import subprocess
     import tempfile
 
+    from intuitf.render.cuda_compat import prepare_numba_cuda
+
+    prepare_numba_cuda()
     import numba.cuda.dispatcher as dispatcher
     from numba import cuda
     from numba import types as t
@@ -466,9 +549,20 @@ def main() -> None:
     ap.add_argument(
         "--ptx", metavar="ARCH", default=None, help="compile the CUDA kernels for ARCH (e.g. sm_90)"
     )
+    ap.add_argument(
+        "--generation",
+        action="store_true",
+        help="time a generation's rendering through a Session (the optimiser's path) on --device",
+    )
+    ap.add_argument("--generations", type=int, default=3, help="--generation: generations to run")
+    ap.add_argument("--gen-size", type=int, default=256, help="--generation: judging picture size")
+    ap.add_argument("--json", default=None, help="append each measured row as a JSON line here")
     args = ap.parse_args()
     if args.ptx:
         ptx_report(args.ptx)
+        return
+    if args.generation:
+        generation_main(args)
         return
     if args.device == "cuda":
         cuda_main(args)

@@ -50,7 +50,6 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from numba import cuda
 
 from intuitf.render import cuda_kernels as ck
 from intuitf.render import kernels
@@ -59,6 +58,9 @@ from intuitf.render.camera import Camera, ViewFrame
 from intuitf.render.context import RenderContext
 from intuitf.render.renderer import BLOCK_SIZE, EARLY_STOP, VolumeRenderer
 from intuitf.tf.gaussian import GaussianTF
+
+#: numba.cuda, as cuda_kernels imported it (after making it importable: see cuda_compat).
+cuda = ck.cuda
 
 #: Bytes of pictures one launch may produce on the GPU (larger populations are split).
 MAX_LAUNCH_OUTPUT = 1 << 30

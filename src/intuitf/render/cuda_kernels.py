@@ -33,9 +33,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import cuda
 
+from intuitf.render.cuda_compat import prepare_numba_cuda
 from intuitf.render.kernels import FLAT_GRADIENT, GRAD_SCALE, SEG_SHIFT
+
+prepare_numba_cuda()  # before numba.cuda is first imported (NumPy 2.5 with numba-cuda)
+from numba import cuda as cuda  # noqa: E402  (re-exported: cuda_backend.cuda)
 
 f32 = np.float32
 

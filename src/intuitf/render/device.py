@@ -43,6 +43,9 @@ def cuda_unavailable_reason() -> str | None:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
+            from intuitf.render.cuda_compat import prepare_numba_cuda
+
+            prepare_numba_cuda()  # numba-cuda with NumPy >= 2.5
             from numba import cuda
     except Exception as exc:  # numba without a CUDA target (built-in target removed)
         return f"numba.cuda cannot be imported ({_first_line(exc) or type(exc).__name__})"
