@@ -1,12 +1,15 @@
 """How a Session comes to be: from a spec, from in-memory objects, from a run folder, or as a
-branch of another run. A mixin of :class:`~intuitf.session.session.Session`."""
+branch of another run. Plain functions; :class:`~intuitf.session.session.Session`'s
+classmethods (``open``, ``create``, ``refine``, ``resume``, ``branch``) call them with the
+class to build (a subclass, such as the web's live session, gets its own kind back).
+"""
 
 from __future__ import annotations
 
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
@@ -21,413 +24,425 @@ from intuitf.session.helpers import (
     _palette_hint,
     _with_selection,
 )
-from intuitf.session.human import HumanVerdict
 from intuitf.session.recorder import recorder_for
 from intuitf.session.rundir import RunDirectory
 from intuitf.session.settings import RunSettings
-from intuitf.session.spec import RunSpec, parse_spec
+from intuitf.session.spec import IntentSpec, RunSpec, VolumeSpec, parse_spec
 from intuitf.tf import GaussianTF
-
-if TYPE_CHECKING:
-    from intuitf.session.session import Session
 from intuitf.volume import Volume
 
+if TYPE_CHECKING:
+    from intuitf.session.lock import RunLock
+    from intuitf.session.session import Session
 
-class SessionOpening:
-    """Constructors of :class:`Session` (open, create, refine, resume, branch)."""
+__all__ = [
+    "branch_session",
+    "create_session",
+    "open_session",
+    "refine_session",
+    "resume_session",
+]
 
-    # -- construction ---------------------------------------------------------------------
-    @classmethod
-    def open(
-        cls,
-        spec: RunSpec | dict,
-        run_dir: str | Path | None,
-        *,
-        overwrite: bool = False,
-        judge: Judge | None = None,
-        volume: Volume | None = None,
-    ) -> Session:
-        """Start the run ``spec`` describes in ``run_dir`` (None: in memory).
+S = TypeVar("S", bound="Session")
 
-        Builds the volume, the judge (with its verdict store in the run folder and its
-        budget), the intent (its pictures copied into the run folder) and the Explorer. A
-        ``judge`` or ``volume`` given here is used instead of building one (tests, notebooks).
-        """
-        from intuitf.session.building import (
-            build_judge,
-            copy_intent_pictures,
-            judging_camera,
-            load_intent,
-        )
-        from intuitf.session.lock import RunLock
 
-        spec = parse_spec(spec)
-        settings = spec.run_settings()
-        rd = RunDirectory(run_dir) if run_dir is not None else None
-        lock = None
-        created = False
-        if rd is not None:
-            if rd.exists() and not overwrite:
-                raise SessionError(
-                    f"{rd.root} already holds a run.",
-                    f"Continue it with --resume {rd.root}, or pick another folder "
-                    "(-o) or --overwrite.",
-                )
-            # The volume's path as seen from the run folder too: a moved tree still finds it.
-            spec = spec.model_copy(update={"volume": spec.volume.anchored(rd.root)})
-            created = not rd.root.exists()
-            rd.root.mkdir(parents=True, exist_ok=True)
-            lock = RunLock(rd.root)
-            lock.acquire()
-        try:
-            vol = volume if volume is not None else spec.volume.load()
-            if rd is not None:
-                spec = copy_intent_pictures(spec, rd.root)
-            if not settings.camera:  # decided once here, and recorded with the run
-                settings.camera = judging_camera(spec, vol, rd.root if rd is not None else None)
-                spec = spec.model_copy(
-                    update={"settings": {**spec.settings, "camera": settings.camera}}
-                )
-            intent = load_intent(spec.intent, rd.root if rd is not None else None)
-            initial = [GaussianTF.from_dict(d) for d in spec.initial]
-            if judge is None:
-                judge = build_judge(spec.judge, rd.root if rd else None, settings.protocol)
-            if spec.intent.kind == "edit":
-                if len(initial) != 1:
-                    raise SessionError(
-                        "A refinement starts from exactly one transfer function.",
-                        "Give the TF to refine as the spec's only 'initial' entry.",
-                    )
-                sess = cls._refine_from(
-                    vol, initial[0], intent, judge, settings, rd, spec, overwrite, lock
-                )
-            else:
-                sess = cls._new(vol, intent, judge, settings, rd, initial, overwrite, spec, lock)
-        except BaseException:
-            if lock is not None:
-                lock.release()
-            if created and rd is not None and not rd.exists():
-                import shutil
+def open_session(
+    cls: type[S],
+    spec: RunSpec | dict[str, Any],
+    run_dir: str | Path | None,
+    *,
+    overwrite: bool = False,
+    judge: Judge | None = None,
+    volume: Volume | None = None,
+) -> S:
+    """Start the run ``spec`` describes in ``run_dir`` (None: in memory); see
+    :meth:`Session.open <intuitf.session.session.Session.open>`."""
+    from intuitf.session.building import (
+        build_judge,
+        copy_intent_pictures,
+        judging_camera,
+        load_intent,
+    )
+    from intuitf.session.lock import RunLock
 
-                shutil.rmtree(rd.root, ignore_errors=True)
-            raise
-        return sess
-
-    @classmethod
-    def create(
-        cls,
-        volume: Volume,
-        *,
-        intent: Intent | None = None,
-        judge: Judge | None = None,
-        settings: RunSettings | None = None,
-        run_dir: str | Path | None = None,
-        initial: Sequence[GaussianTF] = (),
-        overwrite: bool = False,
-        spec: RunSpec | None = None,
-    ) -> Session:
-        """Start a new run from in-memory objects. ``initial`` TFs join the first population."""
-        intent = intent or Intent()
-        settings = _with_default_camera(settings or RunSettings(), volume, spec)
-        settings.validate()
-        rd, lock = _locked(run_dir)
-        try:
-            return cls._new(
-                volume, intent, judge or _metric_judge(), settings, rd, list(initial), overwrite,
-                spec, lock,
-            )  # fmt: skip
-        except BaseException:
-            if lock is not None:
-                lock.release()
-            raise
-
-    @classmethod
-    def _new(cls, volume, intent, judge, settings, rd, initial, overwrite, spec, lock) -> Session:
-        from intuitf.explorer import make_explorer
-
-        settings.validate()
-        plan = settings.stage_plan(intent.kind != "none")
-        counts, _ = volume.histogram()
-        explorer = make_explorer(
-            settings.explorer,
-            population=settings.population,
-            n_gaussians=settings.n_gaussians,
-            generations=plan[0][1],
-            stage=plan[0][0],
-            seed=settings.seed,
-            histogram=counts,
-            value_range=volume.value_range,
-            initial=list(initial),
-            palette=_palette_hint(intent, settings),
-            hints=_material_hints(intent, settings, volume),
-        )
-        if plan[0][0] == "refine":
-            if len(initial) != 1 or not intent.selected:
-                raise SessionError(
-                    "Refinement starts from one transfer function and needs the Gaussians to change.",
-                    "Give exactly one TF to refine and select at least one of its Gaussians.",
-                )
-            try:
-                explorer.set_stage(
-                    "refine", generations=plan[0][1], selected=intent.selected, base=initial[0]
-                )
-            except ValueError as exc:
-                raise SessionError(f"Cannot refine: {exc}") from exc
-        if rd is not None:
-            rd.create(overwrite=overwrite)
-            from intuitf.evaluator.budget import reset_spend
-
-            reset_spend(judge, rd.verdicts)  # a new run has paid nothing yet (--overwrite)
-            spec = _spec_for_record(spec, intent, settings, initial, judge, rd)
-            from intuitf.session.building import redacted
-
-            rd.write_run(
-                {
-                    "spec": redacted(spec).to_dict(),
-                    "volume": volume.summary(),
-                    "intent": _intent_record(intent),
-                    "judge": _judge_name(judge),
-                    "judges": _judge_history(spec, 0),
-                    "settings": settings.to_dict(),
-                    "plan": [list(p) for p in plan],
-                    "initial": [tf.to_dict() for tf in initial],
-                    "parent": spec.parent.model_dump() if spec.parent else None,
-                    "versions": _versions(),
-                    "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-                }
+    spec = parse_spec(spec)
+    settings = spec.run_settings()
+    rd = RunDirectory(run_dir) if run_dir is not None else None
+    lock = None
+    created = False
+    if rd is not None:
+        if rd.exists() and not overwrite:
+            raise SessionError(
+                f"{rd.root} already holds a run.",
+                f"Continue it with --resume {rd.root}, or pick another folder (-o) or --overwrite.",
             )
-            rd.append_journal({"type": "stage", "generation": 0, "stage": plan[0][0]})
-        sess = cls(
-            volume,
-            intent=intent,
-            judge=judge,
-            settings=settings,
-            run_dir=rd,
-            explorer=explorer,
-            spec=spec,
-            lock=lock,
-        )
-        sess.events.emit("stage_started", stage=plan[0][0], generations=plan[0][1], generation=0)
-        return sess
-
-    @classmethod
-    def refine(
-        cls,
-        volume: Volume,
-        tf: GaussianTF,
-        selected: Sequence[int],
-        instruction: str,
-        *,
-        judge: Judge | None = None,
-        settings: RunSettings | None = None,
-        run_dir: str | Path | None = None,
-        about: str | None = None,
-        overwrite: bool = False,
-    ) -> Session:
-        """A run of the refine stage: only the Gaussians ``selected`` (indices into ``tf``) change.
-
-        The judge sees the rendering before the edit and ``instruction``, and prefers
-        candidates where the change happened in the selected features and the rest is kept.
-        """
-        intent = Intent(
-            kind="edit", text=instruction, selected=tuple(int(i) for i in selected), about=about
-        )
-        rd, lock = _locked(run_dir)
-        try:
-            settings = _with_default_camera(settings or RunSettings(), volume, None)
-            return cls._refine_from(
-                volume, tf, intent, judge or _metric_judge(), settings, rd, None, overwrite, lock,
-            )  # fmt: skip
-        except BaseException:
-            if lock is not None:
-                lock.release()
-            raise
-
-    @classmethod
-    def _refine_from(cls, volume, tf, intent, judge, settings, rd, spec, overwrite, lock):
-        if not settings.stages or settings.stages[0][0] != "refine":
-            settings.stages = [("refine", settings.generations)]
-        intent = _with_selection(intent, volume, [tf], settings)  # base picture and mask
-        return cls._new(volume, intent, judge, settings, rd, [tf], overwrite, spec, lock)
-
-    @classmethod
-    def resume(
-        cls,
-        run_dir: str | Path,
-        volume: Volume | None = None,
-        judge: Judge | None = None,
-        *,
-        evaluator: str | None = None,
-        base_url: str | None = None,
-        budget_usd: float | None = None,
-        budget_calls: int | None = None,
-        judge_options: dict | None = None,
-    ) -> Session:
-        """Continue the run in ``run_dir`` from its last checkpoint.
-
-        The volume and the judge are rebuilt from the run's spec unless given. ``evaluator``
-        and ``base_url`` move the run to another model or server (recorded in ``run.json``);
-        the budgets replace the run's and count everything the run already paid.
-        """
-        from intuitf.session.building import build_judge, load_intent, redacted, spec_of_record
-        from intuitf.session.lock import RunLock
-
-        rd = RunDirectory(run_dir)
-        record = rd.read_run()
+        # The volume's path as seen from the run folder too: a moved tree still finds it.
+        spec = spec.model_copy(update={"volume": spec.volume.anchored(rd.root)})
+        created = not rd.root.exists()
+        rd.root.mkdir(parents=True, exist_ok=True)
         lock = RunLock(rd.root)
         lock.acquire()
-        try:
-            spec = spec_of_record(record)
-            settings = RunSettings.from_dict(record["settings"])
-            spec, moved = _moved_spec(spec, evaluator, base_url, budget_usd, budget_calls,
-                                      judge_options, judge is None)  # fmt: skip
-            ckpt = rd.read_checkpoint()
-            vol = volume if volume is not None else spec.volume.load(rd.root)
-            if judge is None:
-                judge = build_judge(spec.judge, rd.root, settings.protocol)
-            generation = int(ckpt["generation"]) if ckpt else 0
-            stored = redacted(spec).to_dict()
-            if moved or stored != record.get("spec"):
-                record["spec"] = stored
-                judges = record.setdefault("judges", [])
-                if moved:
-                    judges.extend(_judge_history(spec, generation))
-                    record["judge"] = _judge_name(judge)
-                rd.write_run(record)
-            if ckpt and ckpt.get("intent"):
-                intent = load_intent(_intent_spec(ckpt["intent"]), rd.root)
-            else:
-                intent = load_intent(spec.intent, rd.root)
-            initial_tfs = [GaussianTF.from_dict(d) for d in spec.initial]
-            intent = _with_selection(intent, vol, initial_tfs, settings)
-            if ckpt is None:
-                # Stopped before the first generation finished: start over, same seed; the
-                # verdict store still holds whatever was paid for.
-                sess = cls._new(vol, intent, judge, settings, None, initial_tfs, False, spec, lock)
-                sess.run_dir = rd
-                sess.recorder = recorder_for(rd)
-                sess.name = rd.root.name
-                sess.events = EventLog(sess.name, sess.recorder.events_path)
-                sess.cost = _paid(judge, sess.cost, rd)
-            else:
-                sess = cls._from_checkpoint(vol, intent, judge, settings, rd, ckpt, spec, lock)
-            sess.judge_moved = moved
-            sess._refresh()
-            if moved:
-                sess._journal(
-                    {"type": "judge", "generation": generation, "judge": _judge_name(judge)}
-                )
-            return sess
-        except BaseException:
-            lock.release()
-            raise
-
-    @classmethod
-    def _from_checkpoint(cls, vol, intent, judge, settings, rd, ckpt, spec, lock) -> Session:
-        """The session a checkpoint describes (the state after its last finished generation)."""
-        from intuitf.explorer import explorer_from_state
-
-        sess = cls(
-            vol,
-            intent=intent,
-            judge=judge,
-            settings=settings,
-            run_dir=rd,
-            explorer=explorer_from_state(ckpt["explorer"]),
-            stage_index=int(ckpt["stage_index"]),
-            generation=int(ckpt["generation"]),
-            cost=_paid(judge, Cost(**ckpt.get("cost", {})), rd),
-            ratings={k: float(v) for k, v in ckpt.get("ratings", {}).items()},
-            last_ranking=list(ckpt.get("ranking", [])),
-            population_tfs={k: GaussianTF.from_dict(v) for k, v in ckpt.get("tfs", {}).items()},
-            stage_games=ckpt.get("stage_games", []),
-            plan=ckpt.get("plan"),
-            spec=spec,
-            human=[HumanVerdict.from_dict(h) for h in ckpt.get("human", [])],
-            pre_tell=ckpt.get("pre_tell"),
-            queries=int(ckpt.get("queries", 0)),
-            lock=lock,
-        )
-        sess._model_ranking = ckpt.get("model_ranking")
-        sess._model_ratings = ckpt.get("model_ratings")
-        if "judged_games" in ckpt:
-            sess._judged_games = [tuple(g) for g in ckpt["judged_games"]]
-            sess._judged_stage = int(ckpt.get("judged_stage", sess.stage_index))
-        if ckpt.get("intent"):
-            sess._current_intent_record = ckpt["intent"]
-        # What was paid when this checkpoint was written (the store may hold more: a killed
-        # attempt at the next generation, which that generation's journal entry counts).
-        sess._paid_at_checkpoint = Cost(**ckpt.get("cost", {}))
-        return sess
-
-    @classmethod
-    def branch(
-        cls,
-        parent_dir: str | Path,
-        run_dir: str | Path,
-        *,
-        generation: int | None = None,
-        candidate: str | None = None,
-        changes: dict | None = None,
-        judge: Judge | None = None,
-        volume: Volume | None = None,
-    ) -> Session:
-        """A new run that starts where ``parent_dir``'s run was at ``generation``, or from its
-        ``candidate`` (an id like ``g003-007``), with ``changes`` to its spec (plain data,
-        merged field by field: a new intent, judge, settings, ...).
-
-        From a generation with an unchanged spec, the branch reproduces the parent's run from
-        there: the Explorer's state, the stage, the ratings and the verdicts are the parent's
-        at that point. From a candidate, the candidate joins a fresh first population (as
-        ``--start-from`` does) and the branch starts its own plan.
-        """
-        from intuitf.session.building import spec_of_record
-        from intuitf.session.spec import ParentLink
-
-        parent = RunDirectory(parent_dir)
-        record = parent.read_run()
-        base = spec_of_record(record).to_dict()
-        for key, value in (changes or {}).items():
-            if isinstance(value, dict) and isinstance(base.get(key), dict) and key != "intent":
-                base[key] = {**base[key], **value}
-            else:
-                base[key] = value
-        for name in ("reference", "sketch", "base"):  # the parent's copies, by full path
-            path = (base.get("intent") or {}).get(name)
-            if path and not Path(path).is_absolute() and (parent.root / path).exists():
-                base["intent"][name] = str(parent.root / path)
-        link = {"run": str(parent.root), "generation": generation, "candidate": candidate}
-        if candidate is not None:
-            tf = _candidate_tf(parent, candidate)
-            base["initial"] = [tf.to_dict()]
-            if (base.get("intent") or {}).get("kind") == "edit":
-                link["selected"] = list(base["intent"].get("selected", []))
-        base["parent"] = link
-        spec = parse_spec(base)
-        if generation is None or generation == 0 or candidate is not None:
-            return cls.open(spec, run_dir, judge=judge, volume=volume)
-        ckpt_path = parent.generation_checkpoint(generation)
-        if not ckpt_path.exists():
-            raise SessionError(
-                f"{parent.root} has no saved state for generation {generation}.",
-                "Branch from a generation the run has finished (see its history).",
+    try:
+        vol = volume if volume is not None else spec.volume.load()
+        if rd is not None:
+            spec = copy_intent_pictures(spec, rd.root)
+        if not settings.camera:  # decided once here, and recorded with the run
+            settings.camera = judging_camera(spec, vol, rd.root if rd is not None else None)
+            spec = spec.model_copy(
+                update={"settings": {**spec.settings, "camera": settings.camera}}
             )
-        ParentLink.model_validate(link)
-        sess = cls.open(spec, run_dir, judge=judge, volume=volume)
-        # Take over the parent's state at that generation, then continue as a resume would.
-        import json
+        intent = load_intent(spec.intent, rd.root if rd is not None else None)
+        initial = [GaussianTF.from_dict(d) for d in spec.initial]
+        if judge is None:
+            judge = build_judge(spec.judge, rd.root if rd else None, settings.protocol)
+        assert judge is not None
+        if spec.intent.kind == "edit":
+            if len(initial) != 1:
+                raise SessionError(
+                    "A refinement starts from exactly one transfer function.",
+                    "Give the TF to refine as the spec's only 'initial' entry.",
+                )
+            sess = _refine_from(
+                cls, vol, initial[0], intent, judge, settings, rd, spec, overwrite, lock
+            )
+        else:
+            sess = _new(cls, vol, intent, judge, settings, rd, initial, overwrite, spec, lock)
+    except BaseException:
+        if lock is not None:
+            lock.release()
+        if created and rd is not None and not rd.exists():
+            import shutil
 
-        state = json.loads(ckpt_path.read_text(encoding="utf-8"))
-        state["cost"] = Cost().to_dict()  # the branch pays only for what it asks itself
-        assert sess.run_dir is not None
-        sess.run_dir.write_checkpoint(state)
-        rd_root, judge_used, vol = sess.run_dir.root, sess.judge, sess.volume
-        sess.close()
-        return cls.resume(rd_root, vol, judge_used)
+            shutil.rmtree(rd.root, ignore_errors=True)
+        raise
+    return sess
+
+
+def create_session(
+    cls: type[S],
+    volume: Volume,
+    *,
+    intent: Intent | None = None,
+    judge: Judge | None = None,
+    settings: RunSettings | None = None,
+    run_dir: str | Path | None = None,
+    initial: Sequence[GaussianTF] = (),
+    overwrite: bool = False,
+    spec: RunSpec | None = None,
+) -> S:
+    """A new run from in-memory objects; see :meth:`Session.create
+    <intuitf.session.session.Session.create>`."""
+    intent = intent or Intent()
+    settings = _with_default_camera(settings or RunSettings(), volume, spec)
+    settings.validate()
+    rd, lock = _locked(run_dir)
+    try:
+        return _new(
+            cls, volume, intent, judge or _metric_judge(), settings, rd, list(initial), overwrite,
+            spec, lock,
+        )  # fmt: skip
+    except BaseException:
+        if lock is not None:
+            lock.release()
+        raise
+
+
+def _new(
+    cls: type[S],
+    volume: Volume,
+    intent: Intent,
+    judge: Judge,
+    settings: RunSettings,
+    rd: RunDirectory | None,
+    initial: list[GaussianTF],
+    overwrite: bool,
+    spec: RunSpec | None,
+    lock: RunLock | None,
+) -> S:
+    """A session at generation 0: its Explorer made, its run folder (if any) written."""
+    from intuitf.explorer import make_explorer
+
+    settings.validate()
+    plan = settings.stage_plan(intent.kind != "none")
+    counts, _ = volume.histogram()
+    explorer = make_explorer(
+        settings.explorer,
+        population=settings.population,
+        n_gaussians=settings.n_gaussians,
+        generations=plan[0][1],
+        stage=plan[0][0],
+        seed=settings.seed,
+        histogram=counts,
+        value_range=volume.value_range,
+        initial=list(initial),
+        palette=_palette_hint(intent, settings),
+        hints=_material_hints(intent, settings, volume),
+    )
+    if plan[0][0] == "refine":
+        if len(initial) != 1 or not intent.selected:
+            raise SessionError(
+                "Refinement starts from one transfer function and needs the Gaussians to change.",
+                "Give exactly one TF to refine and select at least one of its Gaussians.",
+            )
+        try:
+            explorer.set_stage(
+                "refine", generations=plan[0][1], selected=intent.selected, base=initial[0]
+            )
+        except ValueError as exc:
+            raise SessionError(f"Cannot refine: {exc}") from exc
+    if rd is not None:
+        rd.create(overwrite=overwrite)
+        from intuitf.evaluator.budget import reset_spend
+
+        reset_spend(judge, rd.verdicts)  # a new run has paid nothing yet (--overwrite)
+        spec = _spec_for_record(spec, intent, settings, initial, judge, rd)
+        from intuitf.session.building import redacted
+
+        rd.write_run(
+            {
+                "spec": redacted(spec).to_dict(),
+                "volume": volume.summary(),
+                "intent": _intent_record(intent),
+                "judge": _judge_name(judge),
+                "judges": _judge_history(spec, 0),
+                "settings": settings.to_dict(),
+                "plan": [list(p) for p in plan],
+                "initial": [tf.to_dict() for tf in initial],
+                "parent": spec.parent.model_dump() if spec.parent else None,
+                "versions": _versions(),
+                "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            }
+        )
+        rd.append_journal({"type": "stage", "generation": 0, "stage": plan[0][0]})
+    sess = cls(
+        volume,
+        intent=intent,
+        judge=judge,
+        settings=settings,
+        run_dir=rd,
+        explorer=explorer,
+        spec=spec,
+        lock=lock,
+    )
+    sess.events.emit("stage_started", stage=plan[0][0], generations=plan[0][1], generation=0)
+    return sess
+
+
+def refine_session(
+    cls: type[S],
+    volume: Volume,
+    tf: GaussianTF,
+    selected: Sequence[int],
+    instruction: str,
+    *,
+    judge: Judge | None = None,
+    settings: RunSettings | None = None,
+    run_dir: str | Path | None = None,
+    about: str | None = None,
+    overwrite: bool = False,
+) -> S:
+    """A run of the refine stage; see :meth:`Session.refine
+    <intuitf.session.session.Session.refine>`."""
+    intent = Intent(
+        kind="edit", text=instruction, selected=tuple(int(i) for i in selected), about=about
+    )
+    rd, lock = _locked(run_dir)
+    try:
+        settings = _with_default_camera(settings or RunSettings(), volume, None)
+        return _refine_from(
+            cls, volume, tf, intent, judge or _metric_judge(), settings, rd, None, overwrite, lock,
+        )  # fmt: skip
+    except BaseException:
+        if lock is not None:
+            lock.release()
+        raise
+
+
+def _refine_from(
+    cls: type[S],
+    volume: Volume,
+    tf: GaussianTF,
+    intent: Intent,
+    judge: Judge,
+    settings: RunSettings,
+    rd: RunDirectory | None,
+    spec: RunSpec | None,
+    overwrite: bool,
+    lock: RunLock | None,
+) -> S:
+    if not settings.stages or settings.stages[0][0] != "refine":
+        settings.stages = [("refine", settings.generations)]
+    intent = _with_selection(intent, volume, [tf], settings)  # base picture and mask
+    return _new(cls, volume, intent, judge, settings, rd, [tf], overwrite, spec, lock)
+
+
+def resume_session(
+    cls: type[S],
+    run_dir: str | Path,
+    volume: Volume | None = None,
+    judge: Judge | None = None,
+    *,
+    evaluator: str | None = None,
+    base_url: str | None = None,
+    budget_usd: float | None = None,
+    budget_calls: int | None = None,
+    judge_options: dict[str, Any] | None = None,
+) -> S:
+    """Continue the run in ``run_dir`` from its last checkpoint; see :meth:`Session.resume
+    <intuitf.session.session.Session.resume>`."""
+    from intuitf.session.building import build_judge, load_intent, redacted, spec_of_record
+    from intuitf.session.lock import RunLock
+
+    rd = RunDirectory(run_dir)
+    record = rd.read_run()
+    lock = RunLock(rd.root)
+    lock.acquire()
+    try:
+        spec = spec_of_record(record)
+        settings = RunSettings.from_dict(record["settings"])
+        spec, moved = _moved_spec(spec, evaluator, base_url, budget_usd, budget_calls,
+                                  judge_options, judge is None)  # fmt: skip
+        ckpt = rd.read_checkpoint()
+        vol = volume if volume is not None else spec.volume.load(rd.root)
+        if judge is None:
+            judge = build_judge(spec.judge, rd.root, settings.protocol)
+        assert judge is not None
+        generation = int(ckpt["generation"]) if ckpt else 0
+        stored = redacted(spec).to_dict()
+        if moved or stored != record.get("spec"):
+            record["spec"] = stored
+            judges = record.setdefault("judges", [])
+            if moved:
+                judges.extend(_judge_history(spec, generation))
+                record["judge"] = _judge_name(judge)
+            rd.write_run(record)
+        if ckpt and ckpt.get("intent"):
+            intent = load_intent(_intent_spec(ckpt["intent"]), rd.root)
+        else:
+            intent = load_intent(spec.intent, rd.root)
+        initial_tfs = [GaussianTF.from_dict(d) for d in spec.initial]
+        intent = _with_selection(intent, vol, initial_tfs, settings)
+        if ckpt is None:
+            # Stopped before the first generation finished: start over, same seed; the
+            # verdict store still holds whatever was paid for.
+            sess = _new(cls, vol, intent, judge, settings, None, initial_tfs, False, spec, lock)
+            sess.run_dir = rd
+            sess.recorder = recorder_for(rd)
+            sess.name = rd.root.name
+            sess.events = EventLog(sess.name, sess.recorder.events_path)
+            sess.cost = _paid(judge, sess.cost, rd)
+        else:
+            sess = _from_checkpoint(cls, vol, intent, judge, settings, rd, ckpt, spec, lock)
+        sess.judge_moved = moved
+        if moved:
+            sess.recorder.journal(
+                {"type": "judge", "generation": generation, "judge": _judge_name(judge)}
+            )
+        sess._refresh()
+        return sess
+    except BaseException:
+        lock.release()
+        raise
+
+
+def _from_checkpoint(
+    cls: type[S],
+    vol: Volume,
+    intent: Intent,
+    judge: Judge,
+    settings: RunSettings,
+    rd: RunDirectory,
+    ckpt: dict[str, Any],
+    spec: RunSpec,
+    lock: RunLock,
+) -> S:
+    """The session a checkpoint describes (the state after its last finished generation)."""
+    from intuitf.explorer import explorer_from_state
+
+    sess = cls(
+        vol,
+        intent=intent,
+        judge=judge,
+        settings=settings,
+        run_dir=rd,
+        explorer=explorer_from_state(ckpt["explorer"]),
+        stage_index=int(ckpt["stage_index"]),
+        generation=int(ckpt["generation"]),
+        cost=_paid(judge, Cost(**ckpt.get("cost", {})), rd),
+        ratings={k: float(v) for k, v in ckpt.get("ratings", {}).items()},
+        last_ranking=list(ckpt.get("ranking", [])),
+        population_tfs={k: GaussianTF.from_dict(v) for k, v in ckpt.get("tfs", {}).items()},
+        stage_games=ckpt.get("stage_games", []),
+        plan=ckpt.get("plan"),
+        spec=spec,
+        queries=int(ckpt.get("queries", 0)),
+        lock=lock,
+    )
+    sess._restore(ckpt)  # the verdict loop, the current intent, what was paid by then
+    return sess
+
+
+def branch_session(
+    cls: type[S],
+    parent_dir: str | Path,
+    run_dir: str | Path,
+    *,
+    generation: int | None = None,
+    candidate: str | None = None,
+    changes: dict[str, Any] | None = None,
+    judge: Judge | None = None,
+    volume: Volume | None = None,
+) -> S:
+    """A new run from another's generation or candidate; see :meth:`Session.branch
+    <intuitf.session.session.Session.branch>`."""
+    from intuitf.session.building import spec_of_record
+    from intuitf.session.spec import ParentLink
+
+    parent = RunDirectory(parent_dir)
+    record = parent.read_run()
+    base = spec_of_record(record).to_dict()
+    for key, value in (changes or {}).items():
+        if isinstance(value, dict) and isinstance(base.get(key), dict) and key != "intent":
+            base[key] = {**base[key], **value}
+        else:
+            base[key] = value
+    for name in ("reference", "sketch", "base"):  # the parent's copies, by full path
+        path = (base.get("intent") or {}).get(name)
+        if path and not Path(path).is_absolute() and (parent.root / path).exists():
+            base["intent"][name] = str(parent.root / path)
+    link: dict[str, Any] = {"run": str(parent.root), "generation": generation,
+                            "candidate": candidate}  # fmt: skip
+    if candidate is not None:
+        tf = _candidate_tf(parent, candidate)
+        base["initial"] = [tf.to_dict()]
+        if (base.get("intent") or {}).get("kind") == "edit":
+            link["selected"] = list(base["intent"].get("selected", []))
+    base["parent"] = link
+    spec = parse_spec(base)
+    if generation is None or generation == 0 or candidate is not None:
+        return open_session(cls, spec, run_dir, judge=judge, volume=volume)
+    ckpt_path = parent.generation_checkpoint(generation)
+    if not ckpt_path.exists():
+        raise SessionError(
+            f"{parent.root} has no saved state for generation {generation}.",
+            "Branch from a generation the run has finished (see its history).",
+        )
+    ParentLink.model_validate(link)
+    sess = open_session(cls, spec, run_dir, judge=judge, volume=volume)
+    # Take over the parent's state at that generation, then continue as a resume would.
+    import json
+
+    state = json.loads(ckpt_path.read_text(encoding="utf-8"))
+    state["cost"] = Cost().to_dict()  # the branch pays only for what it asks itself
+    assert sess.run_dir is not None
+    sess.run_dir.write_checkpoint(state)
+    rd_root, judge_used, vol = sess.run_dir.root, sess.judge, sess.volume
+    sess.close()
+    return resume_session(cls, rd_root, vol, judge_used)
 
 
 # -- helpers -----------------------------------------------------------------------------
-def _versions() -> dict:
+def _versions() -> dict[str, str]:
     import platform
 
     import numba
@@ -442,9 +457,7 @@ def _versions() -> dict:
     }
 
 
-def _intent_spec(rec: dict):
-    from intuitf.session.spec import IntentSpec
-
+def _intent_spec(rec: dict[str, Any]) -> IntentSpec:
     pictures = rec.get("pictures", {})
     return IntentSpec.model_construct(
         kind=rec.get("kind", "none"),
@@ -457,7 +470,14 @@ def _intent_spec(rec: dict):
     )
 
 
-def _spec_for_record(spec, intent, settings, initial, judge, rd) -> RunSpec:
+def _spec_for_record(
+    spec: RunSpec | None,
+    intent: Intent,
+    settings: RunSettings,
+    initial: list[GaussianTF],
+    judge: Judge,
+    rd: RunDirectory,
+) -> RunSpec:
     """The spec to write into run.json: the given one, or one describing in-memory inputs."""
     from intuitf.session.building import intent_spec_of, save_intent_pictures
     from intuitf.session.spec import JudgeSpec
@@ -485,15 +505,21 @@ def _spec_for_record(spec, intent, settings, initial, judge, rd) -> RunSpec:
     )
 
 
-def _volume_spec_unknown():
-    from intuitf.session.spec import VolumeSpec
-
+def _volume_spec_unknown() -> VolumeSpec:
     # An in-memory volume has no source to reopen; resuming needs the volume passed in.
     return VolumeSpec.model_construct(source="", shape=None, dtype=None, byte_order=None,
                                       spacing=None, max_dim=None)  # fmt: skip
 
 
-def _moved_spec(spec: RunSpec, evaluator, base_url, budget_usd, budget_calls, options, build):
+def _moved_spec(
+    spec: RunSpec,
+    evaluator: str | None,
+    base_url: str | None,
+    budget_usd: float | None,
+    budget_calls: int | None,
+    options: dict[str, Any] | None,
+    build: bool,
+) -> tuple[RunSpec, bool]:
     """The spec with a resume's judge changes applied, and whether the judge moved."""
     from intuitf.session.building import resumed_judge_spec
 
@@ -529,14 +555,14 @@ def _candidate_tf(rd: RunDirectory, candidate: str) -> GaussianTF:
     )
 
 
-def _judge_history(spec: RunSpec, generation: int) -> list[dict]:
+def _judge_history(spec: RunSpec, generation: int) -> list[dict[str, Any]]:
     """run.json's record of a judge taking over at ``generation`` (credentials redacted)."""
     from intuitf.evaluator.factory import judge_record
 
     return judge_record(spec.judge.spec, spec.judge.base_url, generation)["judges"]
 
 
-def _locked(run_dir) -> tuple[RunDirectory | None, Any]:
+def _locked(run_dir: str | Path | None) -> tuple[RunDirectory | None, RunLock | None]:
     """The run folder (made if missing) and this process's lock on it; (None, None) in memory."""
     from intuitf.session.lock import RunLock
 
@@ -547,7 +573,9 @@ def _locked(run_dir) -> tuple[RunDirectory | None, Any]:
     return rd, RunLock(rd.root).acquire()
 
 
-def _with_default_camera(settings: RunSettings, volume, spec) -> RunSettings:
+def _with_default_camera(
+    settings: RunSettings, volume: Volume, spec: RunSpec | None
+) -> RunSettings:
     """``settings`` with the default judging camera filled in when they name none (a copy:
     the caller's object is left as it was)."""
     if settings.camera:
@@ -559,7 +587,7 @@ def _with_default_camera(settings: RunSettings, volume, spec) -> RunSettings:
     return replace(settings, camera=default_camera(volume, spec))
 
 
-def _metric_judge():
+def _metric_judge() -> Judge:
     from intuitf.evaluator.metric import MetricJudge
 
     return MetricJudge()

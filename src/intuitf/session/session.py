@@ -34,9 +34,10 @@ import functools
 import hashlib
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Coroutine, Sequence
+from pathlib import Path
 from types import MappingProxyType
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
@@ -49,21 +50,36 @@ from intuitf.errors import (
     StorageError,
 )
 from intuitf.evaluator.types import Aspect, Cost, Intent, Judge
+from intuitf.session import opening
 from intuitf.session.events import EventLog
-from intuitf.session.helpers import _judge_name, _paid
-from intuitf.session.human import HumanVerdict, refit_ranking, stated_orders
-from intuitf.session.interaction import SessionInteraction
-from intuitf.session.opening import SessionOpening
+from intuitf.session.helpers import (
+    _intent_record,
+    _judge_name,
+    _material_hints,
+    _paid,
+    _palette_hint,
+)
+from intuitf.session.human import HumanVerdict
+from intuitf.session.human_loop import HumanVerdicts
 from intuitf.session.recorder import RunRecorder, recorder_for
 from intuitf.session.records import GenerationRecord, RunOutcome, SessionSnapshot
 from intuitf.session.rundir import RunDirectory
-from intuitf.session.scheduler import BATCH, render_scheduler
+from intuitf.session.scheduler import BATCH, INTERACTIVE, render_scheduler
 from intuitf.session.settings import RunSettings
 from intuitf.session.spec import RunSpec
 from intuitf.tf import GaussianTF
 from intuitf.volume import Volume
 
+if TYPE_CHECKING:
+    from intuitf.render import Camera
+    from intuitf.render.cache import CacheViews
+    from intuitf.session.lock import RunLock
+    from intuitf.session.views import PickResult, ViewRenderer
+
 __all__ = ["Session"]
+
+S = TypeVar("S", bound="Session")
+T = TypeVar("T")
 
 #: Mean absolute difference (0-255 scale) under which two renderings count as the same picture.
 _SAME_PICTURE = 1.0
@@ -93,20 +109,141 @@ class _GatedJudge:
         self._judge = judge
         self.name = getattr(judge, "name", type(judge).__name__)
 
-    async def compare(self, first, second, aspects, intent):
+    async def compare(
+        self, first: np.ndarray, second: np.ndarray, aspects: Sequence[Aspect], intent: Intent
+    ) -> Any:
         await self._session._gate()
         return await self._judge.compare(first, second, aspects, intent)
 
-    def __getattr__(self, name: str):
+    def __getattr__(self, name: str) -> Any:
         return getattr(self._judge, name)
 
 
-class Session(SessionOpening, SessionInteraction):
+class Session:
     """An optimisation run over one volume, one judging camera and an intent.
 
     Build one with :meth:`open` (a spec), :meth:`resume` (a run folder), :meth:`branch`, or
     :meth:`create` (in-memory objects; ``run_dir=None`` keeps everything in memory).
+
+    Made of parts: the run's :attr:`recorder` (journal, checkpoints, pictures), its
+    :attr:`events`, its :attr:`views` (interactive renders), the human-verdict loop
+    (:class:`~intuitf.session.human_loop.HumanVerdicts`, behind :meth:`prefer` and its kin)
+    and the opening functions of :mod:`intuitf.session.opening` (behind the classmethods).
     """
+
+    # -- construction (intuitf.session.opening) -------------------------------------------
+    @classmethod
+    def open(
+        cls: type[S],
+        spec: RunSpec | dict[str, Any],
+        run_dir: str | Path | None,
+        *,
+        overwrite: bool = False,
+        judge: Judge | None = None,
+        volume: Volume | None = None,
+    ) -> S:
+        """Start the run ``spec`` describes in ``run_dir`` (None: in memory).
+
+        Builds the volume, the judge (with its verdict store in the run folder and its
+        budget), the intent (its pictures copied into the run folder) and the Explorer. A
+        ``judge`` or ``volume`` given here is used instead of building one (tests, notebooks).
+        """
+        return opening.open_session(
+            cls, spec, run_dir, overwrite=overwrite, judge=judge, volume=volume
+        )
+
+    @classmethod
+    def create(
+        cls: type[S],
+        volume: Volume,
+        *,
+        intent: Intent | None = None,
+        judge: Judge | None = None,
+        settings: RunSettings | None = None,
+        run_dir: str | Path | None = None,
+        initial: Sequence[GaussianTF] = (),
+        overwrite: bool = False,
+        spec: RunSpec | None = None,
+    ) -> S:
+        """Start a new run from in-memory objects. ``initial`` TFs join the first population."""
+        return opening.create_session(
+            cls, volume, intent=intent, judge=judge, settings=settings, run_dir=run_dir,
+            initial=initial, overwrite=overwrite, spec=spec,
+        )  # fmt: skip
+
+    @classmethod
+    def refine(
+        cls: type[S],
+        volume: Volume,
+        tf: GaussianTF,
+        selected: Sequence[int],
+        instruction: str,
+        *,
+        judge: Judge | None = None,
+        settings: RunSettings | None = None,
+        run_dir: str | Path | None = None,
+        about: str | None = None,
+        overwrite: bool = False,
+    ) -> S:
+        """A run of the refine stage: only the Gaussians ``selected`` (indices into ``tf``) change.
+
+        The judge sees the rendering before the edit and ``instruction``, and prefers
+        candidates where the change happened in the selected features and the rest is kept.
+        """
+        return opening.refine_session(
+            cls, volume, tf, selected, instruction, judge=judge, settings=settings,
+            run_dir=run_dir, about=about, overwrite=overwrite,
+        )  # fmt: skip
+
+    @classmethod
+    def resume(
+        cls: type[S],
+        run_dir: str | Path,
+        volume: Volume | None = None,
+        judge: Judge | None = None,
+        *,
+        evaluator: str | None = None,
+        base_url: str | None = None,
+        budget_usd: float | None = None,
+        budget_calls: int | None = None,
+        judge_options: dict[str, Any] | None = None,
+    ) -> S:
+        """Continue the run in ``run_dir`` from its last checkpoint.
+
+        The volume and the judge are rebuilt from the run's spec unless given. ``evaluator``
+        and ``base_url`` move the run to another model or server (recorded in ``run.json``);
+        the budgets replace the run's and count everything the run already paid.
+        """
+        return opening.resume_session(
+            cls, run_dir, volume, judge, evaluator=evaluator, base_url=base_url,
+            budget_usd=budget_usd, budget_calls=budget_calls, judge_options=judge_options,
+        )  # fmt: skip
+
+    @classmethod
+    def branch(
+        cls: type[S],
+        parent_dir: str | Path,
+        run_dir: str | Path,
+        *,
+        generation: int | None = None,
+        candidate: str | None = None,
+        changes: dict[str, Any] | None = None,
+        judge: Judge | None = None,
+        volume: Volume | None = None,
+    ) -> S:
+        """A new run that starts where ``parent_dir``'s run was at ``generation``, or from its
+        ``candidate`` (an id like ``g003-007``), with ``changes`` to its spec (plain data,
+        merged field by field: a new intent, judge, settings, ...).
+
+        From a generation with an unchanged spec, the branch reproduces the parent's run from
+        there: the Explorer's state, the stage, the ratings and the verdicts are the parent's
+        at that point. From a candidate, the candidate joins a fresh first population (as
+        ``--start-from`` does) and the branch starts its own plan.
+        """
+        return opening.branch_session(
+            cls, parent_dir, run_dir, generation=generation, candidate=candidate,
+            changes=changes, judge=judge, volume=volume,
+        )  # fmt: skip
 
     def __init__(
         self,
@@ -123,13 +260,13 @@ class Session(SessionOpening, SessionInteraction):
         ratings: dict[str, float] | None = None,
         last_ranking: list[str] | None = None,
         population_tfs: dict[str, GaussianTF] | None = None,
-        stage_games: Sequence[Sequence] = (),
-        plan: Sequence[Sequence] | None = None,
+        stage_games: Sequence[Sequence[Any]] = (),
+        plan: Sequence[Sequence[Any]] | None = None,
         spec: RunSpec | None = None,
         human: Sequence[HumanVerdict] = (),
-        pre_tell: dict | None = None,
+        pre_tell: dict[str, Any] | None = None,
         queries: int = 0,
-        lock: Any = None,
+        lock: RunLock | None = None,
     ) -> None:
         from intuitf.render import Camera, VolumeRenderer
         from intuitf.render.context import render_context
@@ -162,15 +299,18 @@ class Session(SessionOpening, SessionInteraction):
         self.stage_games: list[tuple[str, str, float]] = [
             (str(a), str(b), float(s)) for a, b, s in stage_games
         ]
-        #: Every verdict a person gave in this run (undone ones stay, marked).
-        self.human: list[HumanVerdict] = list(human)
-        #: The Explorer's state before the last ``tell``: a person's verdict re-tells it.
-        self._pre_tell = pre_tell
-        #: The verdicts the last generation was ranked with, and its stage (a stage change
-        #: resets ``stage_games``; a person may still judge the last generation's gallery).
-        self._judged_games: list[tuple[str, str, float]] = list(self.stage_games)
-        self._judged_stage = stage_index
+        #: A person's verdicts, their undo and the re-ranking they cause (the human loop).
+        self._verdicts = HumanVerdicts(
+            self,
+            self._verdict_changed,
+            human,
+            pre_tell=pre_tell,
+            judged_games=self.stage_games,
+            judged_stage=stage_index,
+        )
+        #: New questions asked during the run (:meth:`query`), and the current one's record.
         self.queries = int(queries)
+        self._current_intent_record: dict[str, Any] | None = None
         self.camera = Camera.from_dict(settings.camera) if settings.camera else Camera()
         # The run's device becomes its volume's (unless something named one first), so the
         # views, picks and previews of this run render where its generations do.
@@ -185,7 +325,7 @@ class Session(SessionOpening, SessionInteraction):
         self._views = ViewRenderer(
             volume, background=tuple(settings.background), device=settings.device
         )
-        self._cache = None
+        self._cache: Any = None
         self._images: dict[str, np.ndarray] = {}
         self.records: list[GenerationRecord] = []
         self.generation_seconds: list[float] = []
@@ -275,7 +415,17 @@ class Session(SessionOpening, SessionInteraction):
         return self._status
 
     @property
-    def views(self):
+    def stepping(self) -> bool:
+        """Whether a generation is being judged right now."""
+        return self._stepping
+
+    @property
+    def human(self) -> list[HumanVerdict]:
+        """Every verdict a person gave in this run (undone ones stay, marked)."""
+        return self._verdicts.verdicts
+
+    @property
+    def views(self) -> ViewRenderer:
         """The :class:`~intuitf.session.views.ViewRenderer` of this run's interactive views
         (own camera and size, on the run's device and background)."""
         return self._views
@@ -286,7 +436,7 @@ class Session(SessionOpening, SessionInteraction):
         return _judge_name(self.judge)
 
     @property
-    def lock(self):
+    def lock(self) -> RunLock | None:
         """The run folder's lock (None in memory)."""
         return self._lock
 
@@ -317,13 +467,13 @@ class Session(SessionOpening, SessionInteraction):
     def _stage_end(self) -> int:
         return sum(n for _, n in self.plan[: self.stage_index + 1])
 
-    def sample_cache(self):
+    def sample_cache(self) -> CacheViews:
         """The sample cache for the judging camera (built on first use)."""
         if self._cache is None:
             self._cache = self.renderer.sample_cache(self.camera)
         return self._cache
 
-    def set_camera(self, camera) -> None:
+    def set_camera(self, camera: Camera) -> None:
         """Change the judging camera; the tournament's renderings are redone for it.
 
         To look at a result from another side, use :meth:`view`, which leaves the judging
@@ -348,7 +498,12 @@ class Session(SessionOpening, SessionInteraction):
         return img
 
     def render(
-        self, tf: GaussianTF, *, size: int | None = None, camera=None, shading: bool | None = None
+        self,
+        tf: GaussianTF,
+        *,
+        size: int | None = None,
+        camera: Camera | None = None,
+        shading: bool | None = None,
     ) -> np.ndarray:
         """Render any TF with the session's volume (and judging camera unless given)."""
         size = size or self.settings.output_size
@@ -385,6 +540,231 @@ class Session(SessionOpening, SessionInteraction):
                 shown.append(img)
             out.append((cid, tf, self.ratings.get(cid, float("nan"))))
         return out
+
+    # -- interactive views (own camera, ahead of the tournament's renders) ----------------
+    def _tf_of(self, candidate: str | GaussianTF) -> GaussianTF:
+        if isinstance(candidate, GaussianTF):
+            return candidate
+        tf = self.tfs.get(str(candidate))
+        if tf is None:
+            raise SessionError(
+                f"No candidate {candidate!r} in the current population of {self.name or 'this run'}.",
+                "Pass a candidate id from the last generation, or a GaussianTF.",
+            )
+        return tf
+
+    def _interactive(
+        self,
+        candidate: str | GaussianTF,
+        camera: Camera | None,
+        shaded: bool | None,
+        job: Callable[[GaussianTF, Camera, bool], T],
+    ) -> Callable[[], T]:
+        """``job`` for the render worker, with the TF, camera and shading resolved now."""
+        tf, cam, shade = self._tf_of(candidate), camera or self.camera, self._shaded(shaded)
+        return lambda: job(tf, cam, shade)
+
+    def view(
+        self,
+        candidate: str | GaussianTF,
+        camera: Camera | None = None,
+        size: int = 256,
+        shaded: bool | None = None,
+    ) -> np.ndarray:
+        """uint8 RGB of a candidate (or any TF) from ``camera`` (default: the judging one)."""
+        views = self._views
+        job = self._interactive(candidate, camera, shaded,
+                                lambda tf, cam, sh: views.view(tf, cam, size, sh))  # fmt: skip
+        return render_scheduler().call(job, INTERACTIVE)
+
+    async def aview(
+        self,
+        candidate: str | GaussianTF,
+        camera: Camera | None = None,
+        size: int = 256,
+        shaded: bool | None = None,
+    ) -> np.ndarray:
+        """:meth:`view` for async callers (the render runs on the render worker)."""
+        views = self._views
+        job = self._interactive(candidate, camera, shaded,
+                                lambda tf, cam, sh: views.view(tf, cam, size, sh))  # fmt: skip
+        return await render_scheduler().run(job, INTERACTIVE)
+
+    def pick(
+        self,
+        candidate: str | GaussianTF,
+        camera: Camera | None = None,
+        x: int = 0,
+        y: int = 0,
+        size: int = 256,
+        shaded: bool | None = None,
+    ) -> PickResult:
+        """The feature under pixel (x, y) of the view: the visible one of smallest area.
+
+        Returns a :class:`~intuitf.session.views.PickResult`.
+        """
+        views = self._views
+        job = self._interactive(candidate, camera, shaded,
+                                lambda tf, cam, sh: views.pick(tf, cam, int(x), int(y), size, sh))  # fmt: skip
+        return render_scheduler().call(job, INTERACTIVE)
+
+    def features(
+        self,
+        candidate: str | GaussianTF,
+        camera: Camera | None = None,
+        size: int = 256,
+        shaded: bool | None = None,
+    ) -> list[np.ndarray]:
+        """Each Gaussian of the TF rendered alone from ``camera``, in TF order."""
+        views = self._views
+        job = self._interactive(candidate, camera, shaded,
+                                lambda tf, cam, sh: views.features(tf, cam, size, sh))  # fmt: skip
+        return render_scheduler().call(job, INTERACTIVE)
+
+    def attribution(
+        self,
+        candidate: str | GaussianTF,
+        camera: Camera | None = None,
+        size: int = 256,
+        shaded: bool | None = None,
+    ) -> np.ndarray:
+        """Each Gaussian's share of every pixel's opacity, float32 (N, size, size)."""
+        views = self._views
+        job = self._interactive(candidate, camera, shaded,
+                                lambda tf, cam, sh: views.attribution(tf, cam, size, sh))  # fmt: skip
+        return render_scheduler().call(job, INTERACTIVE)
+
+    def _shaded(self, shaded: bool | None) -> bool:
+        return self.settings.shading if shaded is None else bool(shaded)
+
+    # -- control --------------------------------------------------------------------------
+    def pause(self) -> None:
+        """Hold the run before its next match (matches already asked finish)."""
+        if not self._paused:
+            self._paused = True
+            self._refresh("paused" if self._stepping else self._status)
+            self.events.emit("status", status="paused")
+
+    def proceed(self) -> None:
+        """Let a paused run go on."""
+        if self._paused:
+            self._paused = False
+            self._refresh("running" if self._stepping else self._status)
+            self.events.emit("status", status="running")
+
+    def cancel(self) -> None:
+        """Stop the run before its next match; the generation is replayed by the next step."""
+        self._cancel = True
+        self._refresh("cancelling" if self._stepping else self._status)
+        self.events.emit("status", status="cancelling")
+
+    async def _gate(self) -> None:
+        while self._paused and not self._cancel:
+            await asyncio.sleep(0.02)
+        if self._cancel:
+            raise RunCancelled(
+                "The run was cancelled.",
+                "Continue it with session.arun() (or --resume); nothing paid for is lost.",
+            )
+
+    # -- a person in the loop (intuitf.session.human_loop) --------------------------------
+    def prefer(self, better: str, worse: str, note: str = "") -> HumanVerdict:
+        """A person says ``better`` beats ``worse`` (candidate ids of this stage)."""
+        with self._state_lock:
+            return self._verdicts.add("prefer", [str(better)], [str(worse)], note)
+
+    def choose_best(self, best: str, among: Sequence[str], note: str = "") -> HumanVerdict:
+        """A person says ``best`` is the best of ``among``."""
+        others = [str(c) for c in among if str(c) != str(best)]
+        with self._state_lock:
+            return self._verdicts.add("best", [str(best)], others, note)
+
+    def choose_worst(self, worst: str, among: Sequence[str], note: str = "") -> HumanVerdict:
+        """A person says ``worst`` is the worst of ``among``."""
+        others = [str(c) for c in among if str(c) != str(worst)]
+        with self._state_lock:
+            return self._verdicts.add("worst", others, [str(worst)], note)
+
+    def undo_verdict(self, verdict_id: int | None = None) -> HumanVerdict:
+        """Take back a person's verdict (the last active one by default)."""
+        with self._state_lock:
+            return self._verdicts.undo(verdict_id)
+
+    def _verdict_changed(self, action: str, v: HumanVerdict) -> None:
+        """A verdict was added or undone (and the ranking re-fitted): journal it, checkpoint
+        between generations, and announce the new ranking."""
+        self._journal({"type": "human", "action": action, "verdict": v.to_dict()})
+        if not self._stepping:
+            self._checkpoint()
+        self._refresh()
+        self.events.emit(
+            "human_verdict",
+            action=action,
+            verdict=v.to_dict(),
+            ranking=list(self.last_ranking),
+            ratings=self.ratings,
+        )
+
+    # -- a new query ----------------------------------------------------------------------
+    def query(self, intent: Intent, generations: int | None = None) -> None:
+        """Start a new customize stage for ``intent`` after the current generation.
+
+        The run keeps its history; the stage's earlier verdicts answered another question,
+        so the new stage starts with none.
+        """
+        if self._stepping:
+            raise SessionError(
+                "A new query starts between generations.", "Wait for the generation to end."
+            )
+        validate = getattr(intent, "validate", None)
+        if callable(validate):
+            validate()
+        n = int(
+            generations
+            or max(
+                1,
+                self.settings.generations
+                - round(self.settings.generations * self.settings.init_share),
+            )
+        )
+        with self._state_lock:
+            self.queries += 1
+            folder = f"intent/q{self.queries}"
+            pictures: dict[str, str] = {}
+            if self.run_dir is not None:
+                from intuitf.session.building import save_intent_pictures
+
+                pictures = save_intent_pictures(intent, self.run_dir.root, folder)
+            self.intent = intent
+            # The stage now in progress ends here (or is dropped if it has not begun); the
+            # new one follows.
+            done_in_stage = self.generation - sum(k for _, k in self.plan[: self.stage_index])
+            kept = self.plan[: self.stage_index]
+            if done_in_stage > 0:
+                kept.append((self.plan[self.stage_index][0], done_in_stage))
+            self.plan = [*kept, ("customize", n)]
+            self.stage_index = len(self.plan) - 1
+            self.stage_games = []
+            palette = _palette_hint(intent, self.settings)
+            if hasattr(self.explorer, "palette") and palette:
+                from intuitf.explorer.base import _palette
+
+                self.explorer.palette = _palette(palette)
+            if hasattr(self.explorer, "hints"):  # the new words name their own materials
+                from intuitf.explorer.hints import as_hints
+
+                self.explorer.hints = as_hints(_material_hints(intent, self.settings, self.volume))
+            self.explorer.set_stage("customize", generations=n)
+            record = {"type": "query", "generation": self.generation, "intent": _intent_record(intent), "pictures": pictures}  # fmt: skip
+            self._journal(record)
+            self._journal({"type": "stage", "generation": self.generation, "stage": "customize"})
+            self._current_intent_record = {**_intent_record(intent), "pictures": pictures}
+            self._checkpoint()
+            self._refresh()
+        self.events.emit("query", generation=self.generation, intent=_intent_record(intent))
+        self.events.emit(
+            "stage_started", stage="customize", generations=n, generation=self.generation
+        )
 
     # -- the loop -------------------------------------------------------------------------
     async def astep(self) -> GenerationRecord:
@@ -461,7 +841,7 @@ class Session(SessionOpening, SessionInteraction):
             seed=_generation_seed(self.settings.seed, g),
             protocol=self.settings.protocol,  # type: ignore[arg-type]  # checked by RunSettings
         )
-        history = self.stage_games + self._human_games()
+        history = self.stage_games + self._verdicts.games(self.stage_index)
 
         def on_match(m: Any) -> None:
             v = m.verdict
@@ -502,25 +882,17 @@ class Session(SessionOpening, SessionInteraction):
         """The generation's ranking (the model's, refit with a person's verdicts of this
         stage when there are any), told to the Explorer."""
         ids = [c.id for c in candidates]
-        # A person's verdicts of this stage join the fit; without any, the model's ranking
-        # stands exactly as the tournament gave it.
-        self._pre_tell = self.explorer.state_dict()
-        self._model_ranking = list(result.ranking)
-        self._model_ratings = {cid: float(result.ratings[cid]) for cid in ids}
         self.stage_games = self.stage_games + [
             (m.first, m.second, float(m.verdict.p_first)) for m in result.matches
         ]
-        self._judged_games, self._judged_stage = list(self.stage_games), self.stage_index
-        human = self._human_games()
-        if human:
-            ranking, ratings = refit_ranking(
-                ids,
-                self.stage_games + human,
-                tiebreak=list(result.ranking),
-                stated=stated_orders(self.human, self.stage_index),
-            )
-        else:
-            ranking, ratings = list(result.ranking), dict(self._model_ratings)
+        ranking, ratings = self._verdicts.rank_generation(
+            self.explorer.state_dict(),
+            ids,
+            list(result.ranking),
+            {cid: float(result.ratings[cid]) for cid in ids},
+            self.stage_games,
+            self.stage_index,
+        )
         # Fitness comes from the ranking and the stage's pressure schedule.
         self.explorer.tell(ranking)
         return ranking, ratings
@@ -704,7 +1076,7 @@ class Session(SessionOpening, SessionInteraction):
             write_run_outputs(self)
 
     # -- internals ------------------------------------------------------------------------
-    def _run_async(self, coro):
+    def _run_async(self, coro: Coroutine[Any, Any, T]) -> T:
         try:
             asyncio.get_running_loop()
         except RuntimeError:
@@ -788,18 +1160,23 @@ class Session(SessionOpening, SessionInteraction):
             "tfs": {k: v.to_dict() for k, v in self.tfs.items()},
             "stage_games": [list(g) for g in self.stage_games],
             "plan": [list(p) for p in self.plan],
-            "human": [h.to_dict() for h in self.human],
-            "pre_tell": self._pre_tell,
-            "model_ranking": self._model_ranking,
-            "model_ratings": self._model_ratings,
-            "judged_games": [list(g) for g in self._judged_games],
-            "judged_stage": self._judged_stage,
+            **self._verdicts.state(),
             "queries": self.queries,
         }
         if self._current_intent_record is not None:
             state["intent"] = self._current_intent_record
         self.recorder.checkpoint(self.generation, state)
         self._paid_at_checkpoint = Cost(**self.cost.to_dict())
+
+    def _restore(self, ckpt: dict[str, Any]) -> None:
+        """What a checkpoint holds beyond the constructor's arguments: the verdict loop's
+        state, the current question, and what was paid when it was written (the store may hold
+        more: a killed attempt at the next generation, which that generation's journal entry
+        counts)."""
+        self._verdicts.restore(ckpt)
+        if ckpt.get("intent"):
+            self._current_intent_record = ckpt["intent"]
+        self._paid_at_checkpoint = Cost(**ckpt.get("cost", {}))
 
     def _paid_this_generation(self, judged: Cost) -> dict:
         """The journal's figures of the generation just judged: everything paid since the last
@@ -823,7 +1200,7 @@ class Session(SessionOpening, SessionInteraction):
             "cost_usd": paid.usd,
         }
 
-    def _write_generation_pictures(self, g: int, candidates, ranking: list[str]) -> None:
+    def _write_generation_pictures(self, g: int, candidates: list[Any], ranking: list[str]) -> None:
         if not self.recorder.keeps_pictures:
             return
         from intuitf.imageio import png_bytes, render_record
@@ -845,13 +1222,13 @@ class Session(SessionOpening, SessionInteraction):
 
 
 # -- helpers -----------------------------------------------------------------------------
-def _match_dict(m) -> dict:
+def _match_dict(m: Any) -> dict[str, Any]:
     if hasattr(m, "to_dict"):
         return m.to_dict()
     return dict(m.__dict__)
 
 
-def _match_stats(matches) -> dict[str, int]:
+def _match_stats(matches: Sequence[Any]) -> dict[str, int]:
     """Matches decided, undecided (no usable answer) and asked more than once."""
     from intuitf.evaluator.tournament import MatchStats
 
@@ -865,7 +1242,7 @@ def _match_stats(matches) -> dict[str, int]:
             "indistinct": int(st.decided > 0 and ties == st.decided)}  # fmt: skip
 
 
-def _safe_dict(result) -> dict:
+def _safe_dict(result: Any) -> dict[str, Any]:
     try:
         return result.to_dict()
     except Exception:  # a partial result must never break saving the rest
