@@ -284,6 +284,7 @@ def register(app: typer.Typer) -> None:
 
         from intuitf.session import Session
         from intuitf.session.spec import parse_spec
+        from intuitf.session.store import RunStore
 
         started = time.perf_counter()
         timeouts = dict(request_timeout=request_timeout, answer_deadline=answer_deadline)
@@ -344,9 +345,8 @@ def register(app: typer.Typer) -> None:
                 "settings": settings,
                 "initial": initial,
             }
-            run_dir = output or Path("runs") / (
-                f"{_volume_name(volume)}-{time.strftime('%Y%m%d-%H%M%S')}"
-            )
+            # Named by the session's one rule (runs/foot, runs/foot-2, ...), as the web names.
+            run_dir = output or RunStore(Path("runs")).new_run_dir(_volume_name(volume))
             with flag_errors():
                 parse_spec(spec)  # every bad option named before anything is written
             _check_can_create(run_dir)

@@ -94,13 +94,21 @@ class RunStore:
         return self.root / name
 
     def new_name(self, base: str) -> str:
-        """A run name from ``base`` that no run uses yet (``foot``, ``foot-2``, ...)."""
-        base = re.sub(r"[^A-Za-z0-9._-]+", "-", base).strip("-.") or "run"
+        """A run name from ``base`` that no folder under the root uses yet (``foot``,
+        ``foot-2``, ...): the one naming rule of run folders, for every front end."""
+        base = re.sub(r"[^A-Za-z0-9._-]+", "-", base).strip("-._")[:100].strip("-._") or "run"
         name, k = base, 1
         while (self.root / name).exists():
             k += 1
             name = f"{base}-{k}"
         return name
+
+    def new_run_dir(self, base: str) -> Path:
+        """The folder for a new run named after ``base`` (a volume's name, a title):
+        ``ROOT/base``, or ``ROOT/base-2``, ... when taken (see :meth:`new_name`). The folder
+        is not made here: :meth:`Session.open <intuitf.session.session.Session.open>` makes it
+        and removes it again if the run cannot start."""
+        return self.path_of(self.new_name(base))
 
     def names(self) -> list[str]:
         if not self.root.is_dir():
