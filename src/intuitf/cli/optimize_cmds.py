@@ -268,7 +268,7 @@ def register(app: typer.Typer) -> None:
             None, "--start-from", help="TF JSON to include in the first population (repeatable)."
         ),
         output: Path = typer.Option(
-            None, "-o", "--output", help="Run folder (default: runs/<volume>-<time>)."
+            None, "-o", "--output", help="Run folder (default: runs/<volume>, -2, ... if taken)."
         ),
         resume: Path = typer.Option(None, "--resume", help="Continue the run in this folder."),
         overwrite: bool = typer.Option(
