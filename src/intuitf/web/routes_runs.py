@@ -330,8 +330,9 @@ async def _start(web, session: LiveSession) -> str:
     return session.name
 
 
-#: Mean absolute difference of two TFs' RGBA lookup tables below which the gallery folds them.
-SIMILAR_LUT = 0.01
+#: Largest difference of two TFs' RGBA lookup tables (any entry, any channel) below which the
+#: gallery folds them: a refinement that changes one feature a little still shows apart.
+SIMILAR_LUT = 0.02
 GALLERY = 8
 
 
@@ -354,7 +355,7 @@ def fold_gallery(name: str, ranking, tfs, ratings, k: int = GALLERY) -> list[dic
         except (IntuitfError, TypeError, ValueError, KeyError):
             continue
         twin = next((i for i, other in enumerate(luts)
-                     if float(np.abs(lut - other).mean()) < SIMILAR_LUT), None)  # fmt: skip
+                     if float(np.abs(lut - other).max()) < SIMILAR_LUT), None)  # fmt: skip
         if twin is not None:
             out[twin]["similar"].append(cid)
             continue
@@ -483,8 +484,8 @@ async def start_run(request: Request, body: RunIn) -> dict:
     web.registry.check_capacity()
     entry, spec = await asyncio.to_thread(_build_spec, web, body)
     async with web.create_lock:
-        name = web.store.new_name(body.name or entry.id)
-        run_dir = web.store.path_of(name)
+        run_dir = web.store.new_run_dir(body.name or entry.id)  # the session's naming rule
+        name = run_dir.name
         volume = await asyncio.to_thread(web.catalog.load, entry.id)
         spec = spec.model_copy(update={"name": name})
         try:
@@ -813,11 +814,12 @@ async def _branch(web, name, parent_dir, base_name, generation, cid, changes) ->
     else:
         volume = await asyncio.to_thread(web.volume_of_run, name)
     async with web.create_lock:
-        new = web.store.new_name(base_name)
+        new_dir = web.store.new_run_dir(base_name)
+        new = new_dir.name
         changes = {**changes, "name": new}
         try:
             session = await asyncio.to_thread(
-                LiveSession.branch, parent_dir, web.store.path_of(new),
+                LiveSession.branch, parent_dir, new_dir,
                 generation=generation, candidate=cid, changes=changes, volume=volume,
             )  # fmt: skip
         except IntuitfError as exc:

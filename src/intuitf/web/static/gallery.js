@@ -104,7 +104,7 @@ function card(item) {
       el("span.rating", { title: "rating", text: fmtRating(item.rating) }),
       el("span.cid", { text: item.id }),
       (item.similar || []).length
-        ? el("span.dup-count", { title: `Near-duplicates folded here: ${item.similar.join(", ")}`, "data-testid": "similar", text: `+${item.similar.length} similar` })
+        ? el("span.dup-count", { title: `Near-duplicates folded here: ${item.similar.join(", ")}`, "data-testid": "similar", text: `+${item.similar.length}` })
         : null,
       el("label.mark-label", {}, mark),
     ),

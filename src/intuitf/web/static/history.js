@@ -229,8 +229,13 @@ async function deleteRun(info) {
 }
 
 function matchNote(stats) {
-  if (!stats || !stats.undecided) return null;
-  return el("span.gen-warn", { title: `${stats.undecided} matches undecided`, text: `${stats.undecided}?` });
+  if (!stats) return null;
+  const notes = [];
+  if (stats.undecided) notes.push(el("span.gen-warn", { title: `${stats.undecided} matches undecided`, text: `${stats.undecided}?` }));
+  if (stats.indistinct) {
+    notes.push(el("span.gen-warn", { title: "The judge could not tell this generation's candidates apart: its ranking says little.", "data-testid": "indistinct", text: "≈ alike" }));
+  }
+  return notes.length ? notes : null;
 }
 
 /** Start a branch from the current candidate, with the query panel's text if any. */

@@ -1,0 +1,357 @@
+"""A walk through the paper's three case studies in the browser, as a person does them, with
+screenshots to look at (run by tests/web/test_walk_case_studies.py, or by hand)::
+
+    python tests/web/walk_case_studies.py OUT_DIR
+
+1. Bonsai (text, then refine): the volume previewed on its own, its first stage with no
+   words, a query in words, a click on the pot and "make it transparent" for only that.
+2. Tooth (sketch): a result of the tooth, strokes drawn over it, a run from the sketch.
+3. Foot (reference picture): a picture of what is wanted, a run from it.
+
+Along the way it checks what a person would notice: the volume choice holds, no request of
+the page fails with 404, pending pictures look pending, Undo is disabled with nothing to undo,
+the export menu closes after a download, runs can be renamed and deleted.
+Real volumes come from ../shared/data/volumes, downsampled (--max-dim) to keep runs short.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+#: Where the real volumes are (the bonsai, the tooth, the foot).
+DATA = Path(
+    os.environ.get("INTUITF_DATA_DIR")
+    or Path(__file__).resolve().parents[3] / "shared" / "data" / "volumes"
+)
+CASES = ("bonsai_256x256x256_uint8.raw.gz", "tooth_103x94x161_uint8.raw.gz",
+         "foot_zfp8lossy_256x256x256_uint8.raw.gz")  # fmt: skip
+SMALL = {"population": "6", "generations": "2", "image_size": "64"}
+
+
+def have_data() -> bool:
+    return all((DATA / name).is_file() for name in CASES)
+
+
+class Server:
+    """``intuitf serve`` over the three case volumes (downsampled), on a free port."""
+
+    def __init__(self, root: Path, max_dim: int = 64) -> None:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            port = s.getsockname()[1]
+        env = {**os.environ, "PYTHONUNBUFFERED": "1", "COLUMNS": "240", "NO_COLOR": "1"}
+        env.pop("INTUITF_TOKEN", None)
+        cmd = [sys.executable, "-m", "intuitf", "serve", "--no-browser", "--port", str(port),
+               "--runs", str(root / "runs"), "--max-dim", str(max_dim),
+               *[str(DATA / c) for c in CASES]]  # fmt: skip
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                     text=True, env=env)  # fmt: skip
+        self.log: list[str] = []
+        self.url = ""
+        assert self.proc.stdout is not None
+        deadline = time.monotonic() + 120
+        while not self.url and time.monotonic() < deadline:
+            line = self.proc.stdout.readline()
+            if not line:
+                break
+            self.log.append(line.rstrip())
+            m = re.search(r"(http://127\.0\.0\.1:\d+/\?token=[\w-]+)", line)
+            if m:
+                self.url = m.group(1)
+        if not self.url:
+            self.stop()
+            raise RuntimeError("intuitf serve printed no address:\n" + "\n".join(self.log))
+        self.base, self.token = self.url.split("/?token=")
+        # The rest of its output goes to serve.log beside the runs (to read after a failure).
+        import threading
+
+        def drain(stream, path=root / "serve.log") -> None:
+            with open(path, "a", encoding="utf-8") as f:
+                for line in stream:
+                    f.write(line)
+                    f.flush()
+
+        threading.Thread(target=drain, args=(self.proc.stdout,), daemon=True).start()
+        while True:
+            try:
+                self.api("GET", "/api/info")
+                break
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.2)
+
+    def api(self, method: str, path: str):
+        import json
+
+        req = urllib.request.Request(self.base + path, method=method)
+        req.add_header("Authorization", f"token {self.token}")
+        with urllib.request.urlopen(req, timeout=60) as resp:
+            raw = resp.read()
+            return json.loads(raw) if raw else None
+
+    def wait_run(self, name: str, timeout: float = 300.0) -> dict:
+        deadline = time.monotonic() + timeout
+        while True:
+            d = self.api("GET", f"/api/runs/{name}")
+            if d["info"]["status"] != "running":
+                return d
+            if time.monotonic() > deadline:
+                raise AssertionError(f"{name} still going after {timeout} s")
+            time.sleep(0.5)
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+        try:
+            self.proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+
+
+# -- steps ---------------------------------------------------------------------------------------
+def state(page, key: str):
+    return page.evaluate(f"window.intuitfDebug.state[{key!r}]")
+
+
+def shot(page, out: Path, name: str) -> None:
+    page.screenshot(path=str(out / f"{name}.png"))
+
+
+def settle_view(page, timeout: float = 120_000) -> None:
+    page.wait_for_function(
+        "() => { const c = document.getElementById('view-canvas');"
+        " return Number(c.dataset.frames || 0) > 0"
+        " && !document.getElementById('view-stage').classList.contains('busy'); }",
+        timeout=timeout,
+    )
+    page.wait_for_timeout(800)
+
+
+def volume_id(page, stem: str) -> str:
+    ids = page.eval_on_selector_all("#volume-select option", "os => os.map(o => o.value)")
+    return next(i for i in ids if i.startswith(stem))
+
+
+def choose_volume(page, stem: str) -> str:
+    vid = volume_id(page, stem)
+    page.select_option("#volume-select", vid)
+    page.wait_for_function(
+        "v => window.intuitfDebug.state.volumeId === v && !window.intuitfDebug.state.run", arg=vid
+    )
+    return vid
+
+
+def small_settings(page) -> None:
+    if not page.locator(".q-settings").evaluate("d => d.open"):
+        page.click(".q-settings summary")
+    for key, value in SMALL.items():
+        page.fill(f"#q-{key.replace('_', '-')}", value)
+
+
+def start_and_wait(page, server: Server, before: str | None) -> str:
+    page.click("#q-start")
+    try:
+        page.wait_for_function(
+            "b => { const r = window.intuitfDebug.state.run; return r && r !== b; }",
+            arg=before,
+            timeout=300_000,
+        )
+    except Exception:
+        said = page.locator("[data-testid=message]").all_inner_texts()
+        raise AssertionError(f"Start made no run; the page says {said}") from None
+    run = state(page, "run")
+    server.wait_run(run)
+    page.wait_for_function(
+        "r => { const d = window.intuitfDebug.state.runDetail;"
+        " return d && d.info.name === r && d.info.status !== 'running'; }",
+        arg=run,
+        timeout=30_000,
+    )
+    try:
+        page.wait_for_selector(f"#gallery-grid .card[data-qid^='{run}/']", timeout=60_000)
+    except Exception:
+        page.screenshot(path="/tmp/walk-failed.png")
+        detail = page.evaluate("JSON.stringify(window.intuitfDebug.state.runDetail).slice(0, 600)")
+        raise AssertionError(f"{run}: no results in the gallery; the page has {detail}") from None
+    page.wait_for_function(
+        "() => [...document.querySelectorAll('#gallery-grid img')]"
+        ".every(i => i.complete && i.naturalWidth > 0 && !i.classList.contains('loading'))",
+        timeout=120_000,
+    )
+    return run
+
+
+def click_view(page, fx: float, fy: float) -> str:
+    box = page.locator("#view-canvas").bounding_box()
+    page.evaluate("document.getElementById('pick-info').textContent = ''")
+    page.mouse.click(box["x"] + fx * box["width"], box["y"] + fy * box["height"])
+    page.wait_for_function("() => document.getElementById('pick-info').textContent !== ''")
+    return page.inner_text("#pick-info")
+
+
+def pick_something(page, spots) -> int:
+    for fx, fy in spots:
+        m = re.search(r"Selected feature (\d+)", click_view(page, fx, fy))
+        if m:
+            return int(m.group(1)) - 1
+    raise AssertionError("nothing to pick where the walk clicked")
+
+
+def reference_png() -> bytes:
+    """A picture of what the foot study wants: ivory bones on black, faint skin around."""
+    import numpy as np
+    from PIL import Image
+
+    y, x = np.mgrid[:128, :128]
+    img = np.zeros((128, 128, 3), np.uint8)
+    skin = (x - 64) ** 2 / 50**2 + (y - 64) ** 2 / 30**2 < 1
+    img[skin] = (90, 40, 30)
+    for cx in (40, 60, 80):
+        bone = (x - cx) ** 2 / 6**2 + (y - 64) ** 2 / 24**2 < 1
+        img[bone] = (235, 225, 200)
+    buf = io.BytesIO()
+    Image.fromarray(img).save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def walk(browser, server: Server, out: Path) -> dict:
+    """The three case studies; returns what was seen (for the test to check)."""
+    out.mkdir(parents=True, exist_ok=True)
+    seen: dict = {"missing": [], "errors": []}
+    ctx = browser.new_context(viewport={"width": 1440, "height": 900}, accept_downloads=True)
+    page = ctx.new_page()
+    page.set_default_timeout(60_000)
+    page.on("pageerror", lambda e: seen["errors"].append(str(e)))
+    page.on("response", lambda r: seen["missing"].append(r.url)
+            if r.status == 404 and "/api/" in r.url else None)  # fmt: skip
+    page.on(
+        "dialog", lambda d: d.accept(d.default_value or "") if d.type == "prompt" else d.accept()
+    )
+    page.goto(server.url)
+    page.wait_for_selector("body.ready", timeout=120_000)
+
+    # 1. Bonsai: preview, first stage without words, words, then refine the pot.
+    bonsai = choose_volume(page, "bonsai")
+    settle_view(page)
+    page.wait_for_selector("#features-strip .feature", timeout=120_000)
+    page.wait_for_function(
+        "() => [...document.querySelectorAll('#features-strip .feature')]"
+        ".some(b => b.dataset.structure)",
+        timeout=60_000,
+    )
+    seen["labels"] = page.eval_on_selector_all(
+        "#features-strip .feature", "bs => bs.map(b => b.dataset.structure)"
+    )
+    seen["hint"] = page.inner_text(".view-hint")
+    shot(page, out, "1-bonsai-preview")
+    small_settings(page)
+    first = start_and_wait(page, server, None)
+    seen["first_intent"] = server.api("GET", f"/api/runs/{first}")["info"]["intent"]["kind"]
+    seen["undo_disabled"] = page.is_disabled("[data-testid=undo]")
+    settle_view(page)
+    shot(page, out, "1-bonsai-first-stage")
+    choose_volume(page, "bonsai")
+    page.fill("#q-text", "green leaves, a brown trunk, a grey pot")
+    small_settings(page)
+    text_run = start_and_wait(page, server, first)
+    seen["volume_held"] = server.api("GET", f"/api/runs/{text_run}")["volume_id"] == bonsai
+    settle_view(page)
+    shot(page, out, "1-bonsai-text")
+    pick_something(page, [(0.5, 0.8), (0.5, 0.75), (0.45, 0.85), (0.55, 0.7), (0.5, 0.5)])
+    page.fill("#q-text", "make it transparent")
+    refine = start_and_wait(page, server, text_run)
+    seen["refine_intent"] = server.api("GET", f"/api/runs/{refine}")["info"]["intent"]["kind"]
+    settle_view(page)
+    shot(page, out, "1-bonsai-refined")
+    # The export menu closes after a download.
+    page.click("#export-menu summary")
+    with page.expect_download() as dl:
+        page.click("#export-list [data-to=json]")
+    seen["export_name"] = dl.value.suggested_filename
+    page.wait_for_timeout(300)
+    seen["export_menu_open"] = page.locator("#export-menu").evaluate("d => d.open")
+    # Rename, then delete, the first-stage run.
+    page.click(f"#history-tabs .tab[data-run='{first}']")
+    page.click(f".run-node[data-run='{first}'] > .run-head")
+    page.wait_for_function("r => window.intuitfDebug.state.run === r", arg=first)
+    page.click("[data-testid=rename-run]")
+    page.wait_for_timeout(500)
+    page.click("[data-testid=delete-run]")
+    page.wait_for_function(
+        'r => !JSON.stringify(window.intuitfDebug.state.tree).includes(`"name":"${r}"`)',
+        arg=first,
+    )
+    seen["deleted"] = first not in [r["name"] for r in server.api("GET", "/api/runs")]
+    shot(page, out, "1-bonsai-history")
+
+    # 2. Tooth: a result, then a sketch over it.
+    choose_volume(page, "tooth")
+    settle_view(page)
+    page.fill("#q-text", "the tooth's enamel and dentin")
+    small_settings(page)
+    tooth = start_and_wait(page, server, refine)
+    settle_view(page)
+    page.click("#query .seg-kind button[data-kind=sketch]")
+    page.click("#sketch-draw")
+    settle_view(page)
+    box = page.locator("#sketch-canvas").bounding_box()
+    for color, pts in (("#f0f0e0", [(0.45, 0.25), (0.5, 0.2), (0.55, 0.25)]),
+                       ("#d08040", [(0.47, 0.6), (0.5, 0.75), (0.53, 0.6)])):  # fmt: skip
+        page.fill("#sketch-color", color)
+        page.mouse.move(box["x"] + pts[0][0] * box["width"], box["y"] + pts[0][1] * box["height"])
+        page.mouse.down()
+        for x, y in pts[1:]:
+            page.mouse.move(box["x"] + x * box["width"], box["y"] + y * box["height"], steps=4)
+        page.mouse.up()
+    shot(page, out, "2-tooth-sketch")
+    page.fill("#q-text", "white crown, orange root")
+    sketch_run = start_and_wait(page, server, tooth)
+    seen["sketch_intent"] = server.api("GET", f"/api/runs/{sketch_run}")["info"]["intent"]["kind"]
+    settle_view(page)
+    shot(page, out, "2-tooth-from-sketch")
+
+    # 3. Foot: a reference picture.
+    choose_volume(page, "foot")
+    settle_view(page)
+    page.click("#query .seg-kind button[data-kind=image]")
+    ref = out / "3-foot-reference-input.png"
+    ref.write_bytes(reference_png())
+    page.set_input_files("#q-ref", str(ref))
+    page.wait_for_selector("#q-ref-preview img")
+    page.fill("#q-text", "bones like the picture")
+    small_settings(page)
+    foot = start_and_wait(page, server, sketch_run)
+    seen["reference_intent"] = server.api("GET", f"/api/runs/{foot}")["info"]["intent"]["kind"]
+    settle_view(page)
+    shot(page, out, "3-foot-from-reference")
+    page.wait_for_timeout(1000)
+    ctx.close()
+    return seen
+
+
+if __name__ == "__main__":  # pragma: no cover - by hand
+    import tempfile
+
+    from playwright.sync_api import sync_playwright
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from helpers.browser import CHROMIUM, CHROMIUM_ARGS
+
+    target = Path(sys.argv[1] if len(sys.argv) > 1 else "walk-shots")
+    srv = Server(Path(tempfile.mkdtemp()))
+    try:
+        with sync_playwright() as pw:
+            b = pw.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
+            print(walk(b, srv, target))
+    finally:
+        srv.stop()
