@@ -210,7 +210,24 @@ def _shade_terms(grad, px, py, pz, nx, ny, nz, isx, isy, isz, lx, ly, lz, hx, hy
         return 1.0, 0.0
     ndl = abs(gx * lx + gy * ly + gz * lz) / m
     ndh = abs(gx * hx + gy * hy + gz * hz) / m
-    return ndl, ndh**shin
+    return ndl, _power(ndh, shin)
+
+
+@njit(cache=True, fastmath=True, inline="always")
+def _power(x, e):
+    """``x ** e``; whole exponents up to 64 by repeated squaring (a few multiplications in
+    place of a call to ``pow``, on every shaded sample)."""
+    k = int(e)
+    if k != e or k < 0 or k > 64:
+        return x**e
+    r = 1.0
+    b = x
+    while k:
+        if k & 1:
+            r *= b
+        b *= b
+        k >>= 1
+    return r
 
 
 @njit(cache=True, fastmath=True, inline="always")
