@@ -6,8 +6,8 @@
 # Made for a machine lent for minutes (GPU time is scarce), so every step is guarded by its
 # own `timeout`, a failure never stops the next step, and all steps share one time budget
 # (GPU_CHECK_BUDGET seconds, default 390: later steps are skipped, and say so, when it runs
-# out). Without a usable GPU it reports "no GPU" with the reason and runs the simulator checks
-# instead. Everything measured lands in $OUT, at most 8 files:
+# out; GPU_CHECK_SKIP="name ..." skips steps by name). Without a usable GPU it reports
+# "no GPU" with the reason and runs the simulator checks instead. Everything measured lands in $OUT, at most 8 files:
 #
 #   env.txt        card, driver, compute capability, Python and package versions, set-up
 #   steps.tsv      each step: name, ok/FAILED/TIMEOUT/skipped, seconds, command
@@ -48,6 +48,10 @@ FOOT="$INTUITF_DATA/foot_zfp8lossy_256x256x256_uint8.raw.gz"
 step() {
     local name=$1 limit=$2 log=$3 left rc status t0
     shift 3
+    if [[ " ${GPU_CHECK_SKIP:-} " == *" $name "* ]]; then
+        printf '%s\tskipped (GPU_CHECK_SKIP)\t0\t%s\n' "$name" "$*" >>"$OUT/steps.tsv"
+        return 0
+    fi
     left=$((BUDGET - SECONDS))
     if [ "$left" -lt 20 ]; then
         printf '%s\tskipped (time budget spent)\t0\t%s\n' "$name" "$*" >>"$OUT/steps.tsv"

@@ -461,7 +461,8 @@ def ptx_report(arch: str) -> None:
     dispatcher.get_current_device = lambda: _Device()
     from intuitf.render import cuda_kernels as ck
 
-    f32, i32, i64, b, u8, i16 = t.float32, t.int32, t.int64, t.boolean, t.uint8, t.int16
+    f32, f64, i32, i64 = t.float32, t.float64, t.int32, t.int64
+    b, u8, i16 = t.boolean, t.uint8, t.int16
 
     def arr(dt, nd):
         return t.Array(dt, nd, "C")
@@ -470,10 +471,10 @@ def ptx_report(arch: str) -> None:
         "march": (arr(f32, 3), arr(i16, 4), b, arr(u8, 4), i64, arr(f32, 3), b, arr(f32, 1),
                   arr(f32, 1), f32, arr(f32, 1), f32, i64, arr(f32, 1), b, arr(f32, 3),
                   arr(u8, 3)),
-        "count_samples": (arr(f32, 1), arr(f32, 1), i64, i64, i64, f32, i64, arr(i32, 1),
-                          arr(f32, 1)),
-        "fill_samples": (arr(f32, 3), arr(i16, 4), b, arr(f32, 1), arr(f32, 1), f32, i64, f32,
-                         i64, arr(i32, 1), arr(f32, 1), arr(i64, 1), arr(u8, 1), arr(u8, 1),
+        "count_samples": (arr(f64, 1), arr(f64, 1), i64, i64, i64, f64, i64, arr(i32, 1),
+                          arr(f64, 1)),
+        "fill_samples": (arr(f32, 3), arr(i16, 4), b, arr(f64, 1), arr(f64, 1), f64, i64, f64,
+                         i64, arr(i32, 1), arr(f64, 1), arr(i64, 1), arr(u8, 1), arr(u8, 1),
                          arr(u8, 1), arr(u8, 1), arr(u8, 1)),
         "composite": (arr(i32, 1), arr(i64, 1), arr(u8, 1), arr(u8, 1), arr(u8, 1), arr(u8, 1),
                       arr(u8, 1), arr(i32, 2), arr(f32, 3), b, arr(f32, 1), f32, i64, i64, i64,
@@ -495,7 +496,7 @@ def ptx_report(arch: str) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for name, sig in sigs.items():
             ptx, _ = cuda.compile_ptx(getattr(ck, name).py_func, sig, cc=cc, fastmath=True)
-            f64 = sum(1 for ln in ptx.splitlines() if ".f64" in ln and "//" not in ln)
+            n64 = sum(1 for ln in ptx.splitlines() if ".f64" in ln and "//" not in ln)
             info = ""
             if ptxas:
                 path = Path(tmp) / f"{name}.ptx"
@@ -506,7 +507,7 @@ def ptx_report(arch: str) -> None:
                     text=True,
                 )
                 info = " ".join(re.findall(r"Used \d+ registers|\d+ bytes spill \w+", res.stderr))
-            print(f"{name}: {f64} float64 instructions; {info or '(no ptxas found)'}")
+            print(f"{name}: {n64} float64 instructions; {info or '(no ptxas found)'}")
 
 
 def main() -> None:

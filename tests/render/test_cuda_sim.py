@@ -186,19 +186,21 @@ CAMERAS = {
 
 
 def _compare(
-    check: Checks, vol, cam_name: str, size, shading: bool, strict: bool, walk: bool = True
-) -> None:
+    check: Checks, vol, cam_name: str, size, shading: bool, strict: bool, walk: bool = True,
+    levels: int | None = None, march_tol: float = 4e-3,
+) -> None:  # fmt: skip
     """GPU (device="cuda") against CPU pictures, caches, attribution, picks, feature views.
 
-    ``strict``: no pixel more than 2 levels apart, float pictures within 4e-3; ``walk``: also
-    check the bytes the GPU composite reads against a reference that walks every ray in Python
-    (for tiny pictures only)."""
+    ``strict``: 8-bit pixels at most ``levels`` (default 2) apart, float pictures within 4e-3
+    (``march_tol`` for the direct marcher's); ``walk``: also check the bytes the GPU composite
+    reads against a reference that walks every ray in Python (for tiny pictures only)."""
     from intuitf.render import Camera, VolumeRenderer
     from intuitf.render.cuda_backend import CudaSampleCache
     from intuitf.tf import Gaussian, GaussianTF
 
     cam = Camera(**CAMERAS[cam_name])
-    levels = 2 if strict else None
+    if levels is None:
+        levels = 2 if strict else None
     tol = 4e-3 if strict else 2e-2
     tag = f"{vol.name} {cam_name} {'shaded' if shading else 'unshaded'}"
     kw = dict(size=size, shading=shading, background=(0.1, 0.2, 0.3))
@@ -208,11 +210,17 @@ def _compare(
     tfs = _tfs(3, seed=len(tag))
     # Direct ray marching: float RGBA and 8-bit, interpolated and nearest LUT.
     if strict:
-        check.close(f"{tag} march rgba", gpu.render_rgba(tfs[0], cam), cpu.render_rgba(tfs[0], cam))
+        check.close(
+            f"{tag} march rgba",
+            gpu.render_rgba(tfs[0], cam),
+            cpu.render_rgba(tfs[0], cam),
+            march_tol,
+        )
         check.close(
             f"{tag} march nearest",
             gpu.render_rgba(tfs[1], cam, nearest=True),
             cpu.render_rgba(tfs[1], cam, nearest=True),
+            march_tol,
         )
     check.rgb(f"{tag} march rgb8", gpu.render(tfs[2], cam), cpu.render(tfs[2], cam), levels)
     invisible = GaussianTF((Gaussian(mean=0.99, width=0.002, height=1e-9, color=(1, 0, 0)),))
@@ -240,7 +248,7 @@ def _compare(
         f"{tag} cache vs march nearest",
         gc.render_rgba(tfs[2]),
         gpu.render_rgba(tfs[2], cam, nearest=True),
-        tol + (2e-3 if shading else 0.0),  # shading terms rounded to 1/255
+        max(tol, march_tol) + (2e-3 if shading else 0.0),  # shading terms rounded to 1/255
     )
     if strict and walk:  # the reference walks every ray in Python
         expected = _bytes_read_reference(cc, gpu, tfs)
@@ -297,6 +305,10 @@ def _simulator_checks() -> None:
 # On an NVIDIA GPU (skipped without one): the same checks on real volumes
 # ---------------------------------------------------------------------------------------------
 # benchmarks/gpu_check.sh runs these with -s, so every check's figures land in its log.
+# Measured on an H200 (benchmarks/gpu_results/): every 8-bit picture within 1 level of the
+# CPU's, every pick identical, attribution within 1.3e-3. The direct marcher runs float32
+# perspective rays, which put single pixels of the float RGBA up to 5e-3 (1.3/255; mean 4e-7)
+# from the CPU's float64 ones, hence its 6e-3 here.
 @pytest.mark.skipif(cuda_unavailable_reason() is not None, reason="no usable NVIDIA GPU")
 @pytest.mark.parametrize("volume_name", ["foot", "tooth", "neghip"])
 @pytest.mark.parametrize("cam_name", list(CAMERAS))
@@ -304,7 +316,7 @@ def _simulator_checks() -> None:
 def test_gpu_agrees_with_cpu_on_real_volumes(volume_name, cam_name, shading, request):
     check = Checks()
     vol = request.getfixturevalue(volume_name)
-    _compare(check, vol, cam_name, 128, shading, strict=True, walk=False)
+    _compare(check, vol, cam_name, 128, shading, strict=True, walk=False, levels=1, march_tol=6e-3)
     assert not check.failures, "\n".join(check.failures)
 
 

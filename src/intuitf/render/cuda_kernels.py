@@ -6,7 +6,12 @@ trilinear value and LUT classification, the same Blinn–Phong terms from the tr
 gradient, the same front-to-back compositing, early ray termination below ``t_stop`` and
 empty-space skipping (which changes no pixel). Two things differ, both far below 1/255:
 arithmetic is float32 (the CPU kernels mix in float64; consumer GPUs run float64 at 1/64 of
-the float32 rate, so every constant here is a float32 and nothing promotes), and where the
+the float32 rate, so every constant here is a float32 and nothing promotes) except in the
+sample cache's build (``count_samples``, ``fill_samples``), once per camera, which takes a
+float64 camera, step and inverse spacing, so its positions and trilinear values follow the
+CPU's float64 and each value is rounded to the same LUT entry (in float32 a few values per
+thousand landed on the neighbouring entry: on an H200, single pixels up to 14 levels apart
+where a narrow Gaussian makes the LUT steep); and where the
 CPU writes ``RGBA`` and converts to 8 bits in a second pass, the GPU kernels can write the
 8-bit picture directly (a population's float images would cost 16 bytes per pixel over PCIe).
 
@@ -311,7 +316,10 @@ def march(
 # ---------------------------------------------------------------------------------------------
 @cuda.jit(fastmath=True, cache=True)
 def count_samples(cam, isp, nx, ny, nz, dt, tiles_x, counts, t0s):
-    """Samples on each slot's ray (0 for slots outside the picture) and its entry ``t0``."""
+    """Samples on each slot's ray (0 for slots outside the picture) and its entry ``t0``.
+
+    Called with float64 ``cam``, ``isp``, ``dt`` and ``t0s`` (the device functions then run in
+    float64), as :func:`fill_samples`: the same counts and entries as the CPU cache."""
     slot = cuda.grid(1)
     if slot >= counts.shape[0]:
         return
@@ -332,7 +340,9 @@ def fill_samples(
     data, grad, shading, cam, isp, dt, nl, shin, tiles_x, counts, t0s, tile_base, samples,
     diffuse, specular, segmin, segmax,
 ):  # fmt: skip
-    """:func:`kernels.fill_samples` into the tiled layout, with each segment's (min, max)."""
+    """:func:`kernels.fill_samples` into the tiled layout, with each segment's (min, max).
+
+    In float64 (``cam``, ``isp``, ``dt``, ``shin``, ``t0s`` are float64), as the CPU kernel."""
     slot = cuda.grid(1)
     if slot >= counts.shape[0]:
         return
