@@ -23,6 +23,11 @@
 # tests need nothing else. Wheels in .gpu/whl (pure Python except pydantic_core; for the CLI:
 # cma, pydantic and its needs) are installed into a private folder first, and the volumes are
 # read from .gpu/data when it exists (INTUITF_DATA), else from ../shared/data/volumes.
+# Made here (both ignored through .git/info/exclude; the device tool's `carry` takes .gpu):
+#   mkdir -p .gpu/data .gpu/whl && cp ../shared/data/volumes/{foot,tooth,neghip}_*.raw.gz .gpu/data/
+#   pip download --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
+#     --platform manylinux2014_x86_64 -d .gpu/whl pynrrd cma pydantic pydantic_core \
+#     annotated_types typing_inspection typing_extensions   (pydantic_core: pydantic's pin)
 set -u
 
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
