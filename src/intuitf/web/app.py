@@ -86,8 +86,16 @@ class WebState:
         sse_keepalive: float,
         max_live_runs: int,
         drag_budget_ms: float | None = 40.0,
+        device: str | None = None,
+        judge_options: dict | None = None,
     ) -> None:
         self.runs_dir = runs_dir
+        #: Options of new runs' model judges (``serve --max-concurrency`` ...), unless a run's
+        #: spec gives its own judge.
+        self.judge_options = dict(judge_options or {})
+        #: Where views of volumes with no live run render (``serve --device``; None: each
+        #: volume's own device, "auto" unless a run named one).
+        self.device = device
         self.store = RunStore(runs_dir)
         self.registry = RunRegistry(max_live_runs)
         self.catalog = catalog
@@ -150,14 +158,36 @@ class WebState:
         await self.registry.close_all()
 
     # -- rendering helpers -----------------------------------------------------------------
+    def _live_session_of(self, volume):
+        """The live run's session that renders ``volume``, if one does."""
+        for name in self.registry.names():
+            live = self.registry.get(name)
+            if live is not None and live.session.volume is volume:
+                return live.session
+        return None
+
+    def device_for(self, volume) -> str | None:
+        """Where views of ``volume`` render: its live run's device, else the server's."""
+        session = self._live_session_of(volume)
+        return session.settings.device if session is not None else self.device
+
     def view_renderer(self, volume, background=(0.0, 0.0, 0.0)):
-        """A :class:`ViewRenderer` of ``volume`` on ``background`` (kept per pair)."""
+        """A :class:`ViewRenderer` of ``volume`` on ``background``: the live run's own when a
+        run of that volume and background is going (one sample cache for the run's views and
+        the page's), else one kept per (volume, background, device). Renderers of a volume
+        share its render context (gradient, block ranges), so these cost only their pictures."""
         from intuitf.session.views import ViewRenderer
 
-        key = (id(volume), tuple(round(float(c), 4) for c in background))
+        bg = tuple(round(float(c), 4) for c in background)
+        session = self._live_session_of(volume)
+        if session is not None:
+            if tuple(round(float(c), 4) for c in session.settings.background) == bg:
+                return session.views
+        device = self.device_for(volume)
+        key = (id(volume), bg, device)
         got = self._renderers.get_(key)
         if got is None or got[0] is not volume:
-            got = (volume, ViewRenderer(volume, background=tuple(background)))
+            got = (volume, ViewRenderer(volume, background=tuple(background), device=device))
             self._renderers.put(key, got)
         return got[1]
 
@@ -167,11 +197,13 @@ class WebState:
         step, so the picture looks the same, only coarser)."""
         from intuitf.render import VolumeRenderer
 
-        key = ("drag", id(volume), tuple(round(float(c), 4) for c in background), size, shading)
+        device = self.device_for(volume)
+        bg = tuple(round(float(c), 4) for c in background)
+        key = ("drag", id(volume), bg, size, shading, device)
         got = self._renderers.get_(key)
         if got is None or got[0] is not volume:
-            r = VolumeRenderer(volume, size=size, shading=shading,
-                               background=tuple(background), sample_distance=DRAG_STEP)  # fmt: skip
+            r = VolumeRenderer(volume, size=size, shading=shading, background=tuple(background),
+                               sample_distance=DRAG_STEP, device=device)  # fmt: skip
             got = (volume, r)
             self._renderers.put(key, got)
         return got[1]
@@ -269,6 +301,8 @@ def create_app(
     sse_keepalive: float = 15.0,
     max_live_runs: int = 4,
     drag_budget_ms: float | None = 40.0,
+    device: str | None = None,
+    judge_options: dict | None = None,
 ) -> FastAPI:
     """The intuitf web app over the runs folder ``runs_dir``.
 
@@ -279,7 +313,9 @@ def create_app(
     127.0.0.1, localhost and [::1]); ``max_upload_bytes`` limits uploads. ``default_settings``
     fill in run settings a spec leaves out (tests use small ones). ``drag_budget_ms`` is the
     render time drag frames aim at (their side shrinks from 128 to 96 or 64 pixels on a slow
-    machine; None keeps 128).
+    machine; None keeps 128). ``device`` (auto, cpu or cuda) is where new runs and the views of
+    volumes without a live run render (a run's views render on its own device).
+    ``judge_options`` go to the model judge of new runs that name no judge of their own.
     """
     from intuitf import __version__
     from intuitf.web import (
@@ -307,10 +343,14 @@ def create_app(
         evaluator=evaluator,
         token=token,
         max_upload_bytes=int(max_upload_bytes),
-        default_settings=default_settings,
+        default_settings=(
+            {"device": device, **(default_settings or {})} if device else default_settings
+        ),
         sse_keepalive=float(sse_keepalive),
         max_live_runs=int(max_live_runs),
         drag_budget_ms=drag_budget_ms,
+        judge_options=judge_options,
+        device=device,
     )
 
     @asynccontextmanager

@@ -155,18 +155,9 @@ def tf_of(d: Any):
 
 
 def render_rgb8(renderer, tf, camera) -> np.ndarray:
-    """``renderer.render(tf, camera)``, composited over the background with NumPy on the CPU.
-
-    The same picture; it saves the parallel kernel launch of the compositing step, which on a
-    busy machine waits for an OpenMP thread to be scheduled (about 10 ms a frame under load,
-    for a few thousand pixels of work).
-    """
-    if getattr(renderer, "device", "cpu") != "cpu":
-        return renderer.render(tf, camera)
-    rgba = renderer.render_rgba(tf, camera)
-    bg = np.asarray(renderer.background, dtype=np.float32)
-    rgb = (rgba[..., :3] + (1.0 - rgba[..., 3:4]) * bg) * 255.0 + 0.5
-    return np.clip(rgb, 0.0, 255.0).astype(np.uint8)
+    """``renderer.render(tf, camera)`` (kept for the routes that call it: the renderer itself
+    composites small pictures with NumPy now, see ``VolumeRenderer.to_rgb8``)."""
+    return renderer.render(tf, camera)
 
 
 def encode_png(image: np.ndarray) -> bytes:
