@@ -522,3 +522,15 @@ def test_export_png_of_the_current_view(client):
     far = client.get(f"/api/export/{run}/{cid}",
                      params={"to": "png", "camera": json.dumps({"zoom": 1e308})})  # fmt: skip
     assert far.status_code == 422
+
+
+def test_docs_page_dropped_schema_declares_the_error_body(client):
+    assert client.get("/docs").status_code == 404
+    schema = client.get("/openapi.json").json()
+    assert "ErrorOut" in schema["components"]["schemas"]
+    post = schema["paths"]["/api/runs"]["post"]["responses"]
+    for status in ("404", "409", "413", "422", "429"):
+        ref = post[status]["content"]["application/json"]["schema"]["$ref"]
+        assert ref.endswith("/ErrorOut"), (status, ref)
+    run_in = schema["components"]["schemas"]["RunIn"]
+    assert run_in.get("additionalProperties") is False
