@@ -55,3 +55,18 @@ def oracle_images() -> tuple[np.ndarray, list[np.ndarray]]:
 def target_tf() -> GaussianTF:
     """The explorer tests' hidden target TF (see :func:`helpers.tfs.target_tf`)."""
     return _target_tf()
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _private_structure_cache(tmp_path_factory: pytest.TempPathFactory):
+    """Structure maps (and the names a model gave them) are cached per volume on disk: the
+    tests keep theirs in a folder of their own, so no test finds another run's names."""
+    import os
+
+    old = os.environ.get("INTUITF_CACHE_DIR")
+    os.environ["INTUITF_CACHE_DIR"] = str(tmp_path_factory.mktemp("intuitf-cache"))
+    yield
+    if old is None:
+        os.environ.pop("INTUITF_CACHE_DIR", None)
+    else:
+        os.environ["INTUITF_CACHE_DIR"] = old

@@ -676,6 +676,11 @@ def structure_map_of(volume) -> StructureMap:
     return smap
 
 
+def known_structure_map(volume) -> StructureMap | None:
+    """``volume``'s structure map if one was built or remembered already (None: not yet)."""
+    return _MAPS.get(volume)
+
+
 def remember_structure_map(volume, smap: StructureMap) -> None:
     """Use ``smap`` as ``volume``'s structure map from now on (a cached or named one)."""
     _MAPS[volume] = smap

@@ -32,6 +32,8 @@ from scipy import ndimage
 
 from intuitf.tf.defaults import background_cutoff, find_materials
 
+#: The version of the decomposition: a cached map of another version is built again.
+STRUCTURE_MAP_VERSION = 1
 #: Parts smaller than this share of the foreground are specks (merged into the material's rest).
 MIN_PART_SHARE = 0.004
 #: At most this many parts per material are kept as structures (the largest).

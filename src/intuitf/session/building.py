@@ -39,10 +39,10 @@ def default_camera(volume: Any = None, spec: RunSpec | None = None) -> dict:
     if volume is not None and getattr(volume, "data", None) is not None:
         # A view that shows the object: upright along the axis it stands on, chosen by
         # viewpoint entropy of its structures (intuitf.intent.viewpoint).
-        from intuitf.intent.hints import structure_map_of
         from intuitf.intent.viewpoint import choose_view
+        from intuitf.session.structure_cache import cached_structure_map
 
-        return choose_view(structure_map_of(volume)).camera.to_dict()
+        return choose_view(cached_structure_map(volume)).camera.to_dict()
     return Camera(azimuth=DEFAULT_AZIMUTH, elevation=DEFAULT_ELEVATION).to_dict()
 
 

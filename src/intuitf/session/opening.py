@@ -164,6 +164,13 @@ def _new(
 
     settings.validate()
     plan = settings.stage_plan(intent.kind != "none")
+    if rd is not None:
+        from intuitf.evaluator.budget import reset_spend
+
+        reset_spend(judge, rd.verdicts)  # a new run has paid nothing yet (--overwrite)
+    # A model judge names the volume's structures first (once per volume), so the words of
+    # the intent that the first generation's hints are made from match them by name.
+    naming = _name_structures(volume, judge, settings)
     counts, _ = volume.histogram()
     explorer = make_explorer(
         settings.explorer,
@@ -192,9 +199,6 @@ def _new(
             raise SessionError(f"Cannot refine: {exc}") from exc
     if rd is not None:
         rd.create(overwrite=overwrite)
-        from intuitf.evaluator.budget import reset_spend
-
-        reset_spend(judge, rd.verdicts)  # a new run has paid nothing yet (--overwrite)
         spec = _spec_for_record(spec, intent, settings, initial, judge, rd)
         from intuitf.session.building import redacted
 
@@ -211,6 +215,7 @@ def _new(
                 "parent": spec.parent.model_dump() if spec.parent else None,
                 "versions": _versions(),
                 "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                **({"structures": naming.to_dict()} if naming is not None else {}),
             }
         )
         rd.append_journal({"type": "stage", "generation": 0, "stage": plan[0][0]})
@@ -223,6 +228,7 @@ def _new(
         explorer=explorer,
         spec=spec,
         lock=lock,
+        cost=Cost(**naming.cost.to_dict()) if naming is not None else None,
     )
     sess.events.emit("stage_started", stage=plan[0][0], generations=plan[0][1], generation=0)
     return sess
@@ -585,6 +591,19 @@ def _with_default_camera(
     from intuitf.session.building import default_camera
 
     return replace(settings, camera=default_camera(volume, spec))
+
+
+def _name_structures(volume: Volume, judge: Judge, settings: RunSettings) -> Any:
+    """The structures named by a model judge (:mod:`intuitf.session.naming`; None for other
+    judges), seen from the run's judging camera."""
+    from intuitf.session.naming import asks_names, name_run_structures
+
+    if not asks_names(judge):
+        return None
+    from intuitf.render import Camera
+
+    camera = Camera.from_dict(settings.camera) if settings.camera else None
+    return name_run_structures(volume, judge, camera)
 
 
 def _metric_judge() -> Judge:

@@ -272,7 +272,8 @@ class FakeMLLMServer:
         personality: str | Personality | None = None,
         labeller: Any = None,
     ) -> None:
-        #: Answers structure-atlas requests (:class:`intuitf.testing.fake_labels.LabelNamer`).
+        #: Answers structure-atlas requests (:class:`intuitf.testing.fake_labels.LabelNamer`);
+        #: without one, an atlas request is answered with no names.
         self.labeller = labeller
         if score is None and target is None:
             raise ValueError("give a target image or a score function")
@@ -397,8 +398,12 @@ class FakeMLLMServer:
                 self.stats.max_in_flight = max(self.stats.max_in_flight, self.stats.in_flight)
             try:
                 rule = self._rules(body)
-                if rule is None and self.labeller is not None and _atlas_request(body):
-                    rule = 200, _completion(body, self.labeller.answer(body), self.model), {}
+                if rule is None and _atlas_request(body):
+                    # Without a labeller, a model that cannot name anything: no names.
+                    names = self.labeller.answer(body) if self.labeller else '{"names": {}}'
+                    rule = 200, _completion(body, names, self.model), {}
+                    with self._lock:
+                        self.stats.answered += 1
                 if rule is not None:
                     status, payload, headers = rule
                 elif self.personality.slots:
