@@ -102,6 +102,8 @@ def collect_run(run_dir: str | Path) -> RunContents:
     contents.end = ends[-1] if ends else None
 
     summary = _read_json(rd.best_summary)
+    if isinstance(summary, dict):  # {"best": [...], "notes": [...]}; older runs: the list only
+        summary = summary.get("best")
     rating_of = {}
     if isinstance(summary, list):
         rating_of = {
@@ -363,6 +365,11 @@ def report_html(c: RunContents) -> str:
     warning = _match_stats(c).warning
     if warning:
         parts.append(f'<p class="warn"><strong>Warning:</strong> {html.escape(warning)}</p>')
+    from intuitf.session.outputs import indistinct_note
+
+    indistinct = indistinct_note(c.generations)
+    if indistinct:
+        parts.append(f'<p class="warn indistinct">{html.escape(indistinct)}</p>')
     if run.get("created"):
         parts.append(f'<p class="note">Started {_e(run.get("created"))}.</p>')
     if isinstance(run.get("versions"), dict) and run["versions"]:

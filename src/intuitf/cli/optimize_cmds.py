@@ -158,12 +158,17 @@ def _print_match_stats(outcome) -> None:
         return
     from intuitf.evaluator.tournament import MatchStats
     from intuitf.session import RunDirectory
+    from intuitf.session.outputs import indistinct_note
 
-    stats = MatchStats.from_journal(RunDirectory(outcome.run_dir).generations())
+    generations = RunDirectory(outcome.run_dir).generations()
+    stats = MatchStats.from_journal(generations)
     if stats.matches:
         console.print(escape(stats.summary()) + ".")
         if stats.warning:
             console.print(f"[yellow]warning:[/] {escape(stats.warning)}")
+    note = indistinct_note(generations)
+    if note:
+        console.print(f"[yellow]note:[/] {escape(note)}")
 
 
 def register(app: typer.Typer) -> None:

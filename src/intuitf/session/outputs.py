@@ -31,6 +31,31 @@ def evolution_records(generations: list[dict]) -> list[dict]:
     return out
 
 
+def indistinct_generations(generations: list[dict]) -> list[int]:
+    """The generations whose candidates the judge could not tell apart (every decided match a
+    tie), from the journal's generation entries (:meth:`RunDirectory.generations`)."""
+    out = []
+    for e in generations:
+        stats = e.get("match_stats") if isinstance(e.get("match_stats"), dict) else {}
+        if e.get("indistinct") or (stats or {}).get("indistinct"):
+            out.append(int(e["generation"]))
+    return out
+
+
+def indistinct_note(generations: list[dict]) -> str:
+    """A plain sentence naming the generations whose candidates could not be told apart (""
+    when there are none): said at the end of a run, in summary.json, the report and the web."""
+    gens = indistinct_generations(generations)
+    if not gens:
+        return ""
+    which = ", ".join(str(g) for g in gens)
+    word = "generation" if len(gens) == 1 else "generations"
+    return (
+        f"In {word} {which} the judge could not tell the candidates apart (every match a tie): "
+        "their ranking says nothing about the words."
+    )
+
+
 def write_run_outputs(session: Session) -> None:
     """Write best/, evolution.png and report.html into the session's run folder."""
     from intuitf.imageio import png_bytes, render_record
@@ -59,8 +84,16 @@ def write_run_outputs(session: Session) -> None:
             )
         tf_file = rd.best_file(rank, ".tf.json").relative_to(rd.root).as_posix()
         summary.append({"rank": rank, "rating": rating, "tf": tf_file})
-    atomic_write_json(rd.best_summary, summary)
-    records = evolution_records(rd.generations())
+    generations = rd.generations()
+    atomic_write_json(
+        rd.best_summary,
+        {
+            "best": summary,
+            "indistinct_generations": indistinct_generations(generations),
+            "notes": [n for n in (indistinct_note(generations),) if n],
+        },
+    )
+    records = evolution_records(generations)
     if records:
         atomic_write_bytes(rd.root / "evolution.png", evolution_plot(records))
     build_report(rd.root)

@@ -106,7 +106,8 @@ class RunDirectory:
 
     @property
     def best_summary(self) -> Path:
-        """``best/summary.json``: rank, rating and TF file of each kept result."""
+        """``best/summary.json``: ``{"best": [rank, rating and TF file of each kept result],
+        "indistinct_generations": [...], "notes": [sentences]}`` (older runs: the list only)."""
         return self.best_dir / "summary.json"
 
     def best_stem(self, rank: int) -> Path:
