@@ -56,6 +56,42 @@ def parse_size(text: str) -> int | tuple[int, int]:
     return int(m[1]) if m[2] is None else (int(m[1]), int(m[2]))
 
 
+def render_camera(
+    volume,
+    azimuth: float | None = None,
+    elevation: float | None = None,
+    roll: float | None = None,
+    *,
+    zoom: float = 1.0,
+    fov: float = 30.0,
+    orthographic: bool = False,
+):
+    """The camera ``intuitf render`` draws from: with no angle given, the volume's default
+    judging view (:func:`intuitf.session.building.default_camera`, the same as a run's, so a
+    picture to sketch on shows what the run judges); else the angles given, the others at the
+    classic defaults. Zoom, field of view and projection apply either way."""
+    from intuitf.render import Camera
+
+    if azimuth is None and elevation is None and roll is None:
+        from intuitf.session.building import default_camera
+
+        view = Camera.from_dict(default_camera(volume))
+    else:
+        view = Camera(
+            azimuth=vo.DEFAULT_AZIMUTH if azimuth is None else azimuth,
+            elevation=vo.DEFAULT_ELEVATION if elevation is None else elevation,
+            roll=0.0 if roll is None else roll,
+        )
+    return Camera(
+        azimuth=view.azimuth,
+        elevation=view.elevation,
+        roll=view.roll,
+        zoom=zoom,
+        fov=fov,
+        projection="orthographic" if orthographic else "perspective",
+    )
+
+
 def render_command(
     volume: vo.VolumeArg,
     output: Annotated[
@@ -77,15 +113,28 @@ def render_command(
         ),
     ] = None,
     azimuth: Annotated[
-        float,
-        typer.Option(help="Turn about the vertical (z) axis, degrees.", rich_help_panel=_VIEW),
-    ] = vo.DEFAULT_AZIMUTH,
+        float | None,
+        typer.Option(
+            help="Turn about the vertical (z) axis, degrees. Without --azimuth, --elevation and "
+            "--roll: the view chosen for the volume, the one runs judge from "
+            f"(given some: the others default to {vo.DEFAULT_AZIMUTH:g}, "
+            f"{vo.DEFAULT_ELEVATION:g} and 0).",
+            show_default=False,
+            rich_help_panel=_VIEW,
+        ),
+    ] = None,
     elevation: Annotated[
-        float, typer.Option(help="Raise the camera towards +z, degrees.", rich_help_panel=_VIEW)
-    ] = vo.DEFAULT_ELEVATION,
+        float | None,
+        typer.Option(
+            help="Raise the camera towards +z, degrees.", show_default=False, rich_help_panel=_VIEW
+        ),
+    ] = None,
     roll: Annotated[
-        float, typer.Option(help="Turn the picture clockwise, degrees.", rich_help_panel=_VIEW)
-    ] = 0.0,
+        float | None,
+        typer.Option(
+            help="Turn the picture clockwise, degrees.", show_default=False, rich_help_panel=_VIEW
+        ),
+    ] = None,
     zoom: Annotated[
         float,
         typer.Option(help="1 fits the whole volume; 2 is twice as large.", rich_help_panel=_VIEW),
@@ -141,18 +190,13 @@ def render_command(
     bg = parse_color(background)
     picture = parse_size(size)
     device = select_device(device)  # a missing GPU is reported before any work
-    camera = Camera(
-        azimuth=azimuth,
-        elevation=elevation,
-        roll=roll,
-        zoom=zoom,
-        fov=fov,
-        projection="orthographic" if orthographic else "perspective",
-    )
+    Camera(zoom=zoom, fov=fov)  # a bad zoom or field of view too
     tf = load_tf(tf_path) if tf_path is not None else None
     vol = vo.open_volume(volume, shape, dtype, byte_order, spacing, max_dim)
     for note in vol.notes:
         console.print(f"[dim]{note}[/]", highlight=False)
+    camera = render_camera(vol, azimuth, elevation, roll, zoom=zoom, fov=fov,
+                           orthographic=orthographic)  # fmt: skip
     if tf is None:
         tf = default_tf(vol.histogram()[0], vol.value_range)
     renderer = VolumeRenderer(

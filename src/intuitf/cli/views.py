@@ -16,7 +16,6 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from intuitf.cli import options as vo
 from intuitf.errors import IntuitfError
 
 #: Judging picture size when nothing else decides it.
@@ -83,9 +82,9 @@ def judging_view(
                 f"{on} does not record the camera it was rendered with (it was not written by "
                 "intuitf, or a program that saved it dropped its metadata), so it is unknown "
                 "which parts of the volume the strokes were drawn on.",
-                "Give the view it shows: --azimuth A --elevation E (intuitf render's default is "
-                f"--azimuth {vo.DEFAULT_AZIMUTH:g} --elevation {vo.DEFAULT_ELEVATION:g}), or "
-                "make the base picture with `intuitf render` and draw on that.",
+                "Give the view it shows: --azimuth A --elevation E, or make the base picture "
+                "with `intuitf render` (it records its camera: with no angle given, the view "
+                "chosen for the volume, the one runs judge from) and draw on that.",
             )
         camera = default_camera(azimuth, elevation)
         notes.append(
