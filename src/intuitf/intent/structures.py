@@ -33,7 +33,7 @@ from scipy import ndimage
 from intuitf.tf.defaults import background_cutoff, find_materials
 
 #: The version of the decomposition: a cached map of another version is built again.
-STRUCTURE_MAP_VERSION = 1
+STRUCTURE_MAP_VERSION = 2
 #: Parts smaller than this share of the foreground are specks (merged into the material's rest).
 MIN_PART_SHARE = 0.004
 #: At most this many parts per material are kept as structures (the largest).
@@ -212,8 +212,32 @@ def up_axis_of(fg: np.ndarray) -> tuple[int, int]:
             if score > best_score:
                 best, best_score = (ax_data, sign), score
     if best[0] == 2 or best_score < 0.3:
-        return 2, 1  # the scanner's convention: a tooth's crown is wider than its root
+        # The scanner's convention (a tooth's crown is wider than its root, so "the wide end
+        # is the base" does not hold along z), except for a head scanned from the top down.
+        return 2, _z_sign(zyx)
     return best
+
+
+#: A z end whose slabs (1/16 of the slices) hold at most this share of the largest cross
+#: section is closed (a dome: the top of a skull); at least ``CUT_END`` is cut by the box.
+CLOSED_END, CUT_END = 0.12, 0.3
+
+
+def _z_sign(fg: np.ndarray) -> int:
+    """+1, unless the object is closed like a dome at the low z end and cut by the box at the
+    high end: then it is a head (or body part) stored from its top down, and -z is up.
+
+    A CT of a head starts at the top of the skull or at the neck. The skull's top is a closed
+    dome; the neck is cut by the scan's end. So the closed end is the top. Objects closed at
+    both ends (a tooth) or cut at the low end (a foot on its sole, a chest) keep +z.
+    """
+    prof = fg.sum(axis=(1, 2)).astype(np.float64)  # cross-section per z slice
+    if prof.max() <= 0:
+        return 1
+    prof /= prof.max()
+    k = max(1, len(prof) // 16)
+    low, high = float(prof[:k].mean()), float(prof[-k:].mean())
+    return -1 if low <= CLOSED_END and high >= CUT_END else 1
 
 
 def build_structure_map(
