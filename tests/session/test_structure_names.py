@@ -154,3 +154,15 @@ def test_a_damaged_cache_entry_is_rebuilt():
         p.write_text("{not json")
     again = cached_structure_map(Volume.from_array(vol.data.copy(), value_range=(0.0, 1.0)))
     assert again.foreground()
+
+
+def test_a_resumed_run_finds_the_names_again(tmp_path):
+    vol, labels = tree()
+    namer = LabelNamer(vol.data, labels, {1: "pot", 2: "trunk", 3: "leaves"}, error_rate=0.0)
+    with FakeMLLMServer(target=np.zeros((32, 32, 3), np.uint8), labeller=namer) as srv:
+        Session.open(spec(srv.base_url), tmp_path / "r", volume=vol).close()
+        again = Volume.from_array(vol.data.copy(), value_range=(0.0, 1.0))  # a new process
+        with Session.resume(tmp_path / "r", volume=again):
+            names = {x.name for x in structure_map_of(again).foreground()}
+        assert {"pot", "trunk", "leaves"} <= names
+        assert len(atlas_requests(srv)) == 1

@@ -310,6 +310,12 @@ def resume_session(
                                   judge_options, judge is None)  # fmt: skip
         ckpt = rd.read_checkpoint()
         vol = volume if volume is not None else spec.volume.load(rd.root)
+        if (record.get("structures") or {}).get("names"):
+            from intuitf.session.structure_cache import cached_structure_map
+
+            # The names a model gave at the opening (kept in the volume's cache): a new
+            # question asked during the resumed run matches its words by them too.
+            cached_structure_map(vol)
         if judge is None:
             judge = build_judge(spec.judge, rd.root, settings.protocol)
         assert judge is not None
