@@ -446,3 +446,20 @@ def test_optimize_refuses_a_money_budget_for_a_model_of_unknown_price(tmp_path):
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert "No price is known" in said and "--price" in said and "--unpriced" in said
     assert not (run / "run.json").exists()
+
+
+def test_a_400_that_stays_after_its_fix_is_not_asked_again_until_the_deadline(
+    oracle_images, monkeypatch
+):
+    # A question put in a form the profile does not describe used to be "fixed" and resent
+    # in a loop for the whole answer deadline (about 950 requests against the fake server).
+    target, c = oracle_images
+    body = {"error": {"message": "response_format is not supported", "param": "response_format",
+                      "code": "unsupported_parameter", "type": "invalid_request_error"}}  # fmt: skip
+    srv = _answering(400, body)
+    with srv:
+        j = MLLMJudge("m", base_url=srv.base_url, swap="never", max_retries=0)
+        monkeypatch.setattr(j, "_adapt", lambda *a, **k: True)  # believes every 400 fixed
+        with pytest.raises(JudgeError, match="400"):
+            asyncio.run(j.compare(c[0], c[3], Q, Intent()))
+    assert srv.stats.requests == 7  # the question and six resends, then its error

@@ -558,6 +558,7 @@ class MLLMJudge:
         limited = 0  # rate-limited tries of this answer (counted apart from failures)
         started: float | None = None  # when the first attempt got its turn
         deadline_hit = False
+        resent = 0  # sent again because a 400 was fixed (bounded: a fix must not loop)
         while attempt <= self.max_retries:
             if self._gave_up_at is not None and started is None:
                 if time.monotonic() - self._gave_up_at < self.deadline:
@@ -596,9 +597,12 @@ class MLLMJudge:
                 if status == 402 or "insufficient_quota" in (code + " " + message):
                     self.cost += cost
                     raise self._billing(status, code, message) from None
-                if status in (400, 404, 415, 422) and self._adapt(
-                    status, param, code, message, kwargs
+                if (
+                    status in (400, 404, 415, 422)
+                    and resent < _MAX_RESENDS
+                    and self._adapt(status, param, code, message, kwargs)
                 ):
+                    resent += 1
                     continue  # one thing fixed: the same question, asked right
                 cost.failed_calls += 1
                 if status not in _RETRYABLE:
@@ -931,6 +935,13 @@ class MLLMJudge:
 
 class _OutOfTime(Exception):
     """The answer's deadline passed before another attempt could start."""
+
+
+#: How often one question is sent again after fixing what a 400 named. Each adaptable thing is
+#: fixed once, so a well-behaved server needs at most a handful; a server that keeps rejecting
+#: a request the judge believes fixed (or a question built in a form the profile does not
+#: describe) then fails as that request's error instead of being asked until the deadline.
+_MAX_RESENDS = 6
 
 
 def _settings(kwargs: dict) -> dict:
