@@ -395,11 +395,16 @@ class WorkerCore:
         else:  # no TF to carry (a picture), or --no-carry: the volume's own default TF
             start = default_tf(counts, tuple(vol.value_range))
         initial = [start.to_dict()]
+        template = self.config.template
         spec = {
-            **self.config.template,
+            **template,
             "name": item.key,
             "volume": {"source": item.source, **self.config.reader},
             "initial": initial,
+            # A batch gives many volumes one look from a reference and spends one shared
+            # budget through its workers' gated judges: it does not send the per-volume
+            # atlas request that names structures for words (it would pass by that gate).
+            "settings": {"name_structures": False, **(template.get("settings") or {})},
         }
         session = Session.open(spec, rd, volume=vol)
         try:

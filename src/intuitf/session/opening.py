@@ -604,7 +604,7 @@ def _name_structures(volume: Volume, judge: Judge, settings: RunSettings) -> Any
     judges), seen from the run's judging camera."""
     from intuitf.session.naming import asks_names, name_run_structures
 
-    if not asks_names(judge):
+    if not settings.name_structures or not asks_names(judge):
         return None
     from intuitf.render import Camera
 

@@ -42,6 +42,9 @@ class RunSettings:
     #: Where rendering runs: ``auto`` (an NVIDIA GPU when usable, else the CPU), cpu, cuda.
     device: str = "auto"
     material_hints: bool = True
+    #: A model judge names the volume's structures from an atlas first (one request per
+    #: volume, cached); off, words are matched to structures by their descriptors only.
+    name_structures: bool = True
 
     def validate(self) -> None:
         if not 4 <= self.population <= 1000:
