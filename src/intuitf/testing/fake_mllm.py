@@ -223,6 +223,9 @@ class ServerStats:
     #: Reasoning tokens spent, and answers left empty because the budget went on reasoning.
     reasoning_tokens: int = 0
     empty_answers: int = 0
+    #: Structure-atlas requests among :attr:`requests` (a model-judged run names its
+    #: volume's structures once before its first generation).
+    atlas_requests: int = 0
 
 
 def _small(img: np.ndarray) -> np.ndarray:
@@ -404,6 +407,7 @@ class FakeMLLMServer:
                     rule = 200, _completion(body, names, self.model), {}
                     with self._lock:
                         self.stats.answered += 1
+                        self.stats.atlas_requests += 1
                 if rule is not None:
                     status, payload, headers = rule
                 elif self.personality.slots:
