@@ -550,42 +550,54 @@ def test_model_server_down_is_a_message(page, web_server):
 
 
 def test_pause_resume_stop_continue_and_a_new_stage(page, web_server, shots):
-    page.fill("#q-text", "opaque ivory bone")
-    open_settings(page, population="8", generations="8")
-    run = start_new_run(page)
-    # Live progress while it runs: stage, generations, matches judged of the generation.
-    page.wait_for_selector("#progress .kv.matches")
-    assert "generations" in page.inner_text("#progress")
-    shot(page, shots, "running")
-    status = "[data-testid=run-status]"
-    page.click("#run-pause")
-    page.wait_for_function(f"() => document.querySelector('{status}').textContent === 'paused'")
-    assert page.inner_text("#run-pause") == "Resume"
-    page.click("#run-pause")
-    page.wait_for_function(f"() => document.querySelector('{status}').textContent === 'running'")
-    page.click("#run-stop")
-    detail = wait_run_done(page, web_server, run)
-    assert detail["info"]["status"] == "cancelled"
-    done = detail["info"]["generations_done"]
-    assert done < 8
-    # Resume it where it stopped; then a new customize stage of the same run.
-    page.wait_for_selector("#run-continue:not([hidden])")
-    page.click("#run-continue")
-    page.wait_for_function(f"() => document.querySelector('{status}').textContent === 'running'")
-    detail = wait_run_done(page, web_server, run)
-    assert detail["info"]["status"] == "completed" and detail["info"]["generations_done"] == 8
-    page.click("#query .seg-mode button[data-mode=continue]")
-    page.fill("#q-text", "golden bone")
-    page.fill("#q-generations", "1")
-    assert "Continue" in page.inner_text("#q-start")
-    page.click("#q-start")
-    page.wait_for_function(
-        "run => window.intuitfDebug.state.runDetail?.info.generations_done === 9",
-        arg=run,
-        timeout=120_000,
-    )
-    assert current_run(page) == run
-    page.wait_for_selector(f".run-node[data-run='{run}'] .stage-mark.stage-customize")
+    from intuitf.testing.fake_mllm import FakeMLLMServer
+
+    # A model judge slow enough (0.1 s a comparison) that the run cannot end between two
+    # clicks, and Stop given while the run is paused: Stop always lands before the run's end,
+    # however fast or loaded the machine.
+    with FakeMLLMServer(score=lambda im: float(np.mean(im)), latency=0.1) as srv:
+        page.fill("#q-text", "opaque ivory bone")
+        open_settings(page, population="8", generations="8", evaluator=srv.base_url)
+        run = start_new_run(page)
+        # Live progress while it runs: stage, generations, matches judged of the generation.
+        page.wait_for_selector("#progress .kv.matches")
+        assert "generations" in page.inner_text("#progress")
+        shot(page, shots, "running")
+        status = "[data-testid=run-status]"
+        page.click("#run-pause")
+        page.wait_for_function(f"() => document.querySelector('{status}').textContent === 'paused'")
+        assert page.inner_text("#run-pause") == "Resume"
+        page.click("#run-pause")
+        page.wait_for_function(
+            f"() => document.querySelector('{status}').textContent === 'running'"
+        )
+        page.click("#run-pause")
+        page.wait_for_function(f"() => document.querySelector('{status}').textContent === 'paused'")
+        page.click("#run-stop")
+        detail = wait_run_done(page, web_server, run)
+        assert detail["info"]["status"] == "cancelled"
+        done = detail["info"]["generations_done"]
+        assert done < 8
+        # Resume it where it stopped; then a new customize stage of the same run.
+        page.wait_for_selector("#run-continue:not([hidden])")
+        page.click("#run-continue")
+        page.wait_for_function(
+            f"() => document.querySelector('{status}').textContent === 'running'"
+        )
+        detail = wait_run_done(page, web_server, run)
+        assert detail["info"]["status"] == "completed" and detail["info"]["generations_done"] == 8
+        page.click("#query .seg-mode button[data-mode=continue]")
+        page.fill("#q-text", "golden bone")
+        page.fill("#q-generations", "1")
+        assert "Continue" in page.inner_text("#q-start")
+        page.click("#q-start")
+        page.wait_for_function(
+            "run => window.intuitfDebug.state.runDetail?.info.generations_done === 9",
+            arg=run,
+            timeout=120_000,
+        )
+        assert current_run(page) == run
+        page.wait_for_selector(f".run-node[data-run='{run}'] .stage-mark.stage-customize")
 
 
 def test_volume_upload_and_a_volume_that_does_not_load(page, tmp_path):
