@@ -18,7 +18,7 @@ from intuitf.testing.fake_mllm import FakeMLLMServer
 from intuitf.volume import Volume
 
 SETTINGS = {"population": 4, "generations": 1, "seed": 3, "image_size": 32, "output_size": 32,
-            "top_k": 1}  # fmt: skip
+            "top_k": 1, "name_structures": True}  # fmt: skip
 
 
 @pytest.fixture(autouse=True)

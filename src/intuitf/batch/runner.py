@@ -402,9 +402,9 @@ class WorkerCore:
             "volume": {"source": item.source, **self.config.reader},
             "initial": initial,
             # A batch gives many volumes one look from a reference and spends one shared
-            # budget through its workers' gated judges: it does not send the per-volume
-            # atlas request that names structures for words (it would pass by that gate).
-            "settings": {"name_structures": False, **(template.get("settings") or {})},
+            # budget through its workers' gated judges: it never sends the per-volume atlas
+            # request that names structures for words (it would pass by that gate).
+            "settings": {**(template.get("settings") or {}), "name_structures": False},
         }
         session = Session.open(spec, rd, volume=vol)
         try:

@@ -43,8 +43,10 @@ class RunSettings:
     device: str = "auto"
     material_hints: bool = True
     #: A model judge names the volume's structures from an atlas first (one request per
-    #: volume, cached); off, words are matched to structures by their descriptors only.
-    name_structures: bool = True
+    #: volume, cached); off (the default, for now: its request is not yet counted the way
+    #: the budget's kill-and-resume accounting expects), words are matched to structures by
+    #: their descriptors only.
+    name_structures: bool = False
 
     def validate(self) -> None:
         if not 4 <= self.population <= 1000:

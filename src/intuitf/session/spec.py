@@ -85,7 +85,7 @@ class SettingsSchema(BaseModel):
     palette_hint: StrictBool = True
     device: Literal["auto", "cpu", "cuda"] = "auto"
     material_hints: StrictBool = True
-    name_structures: StrictBool = True
+    name_structures: StrictBool = False
 
     @field_validator("camera")
     @classmethod
