@@ -231,8 +231,8 @@ def load_pairs(folder: Path = OUT):
 
 def agreement(judge, folder: Path = OUT, aspect_set: str = "quality") -> dict[str, float]:
     """Share of pairs where ``judge``'s overall verdict names the labelled side, per kind."""
-    from intuitf.intent.aspects import aspects_for
     from intuitf.evaluator.types import Intent
+    from intuitf.intent.aspects import aspects_for
 
     aspects = aspects_for(aspect_set)
     hits: dict[str, list[float]] = {}

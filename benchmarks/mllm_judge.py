@@ -14,10 +14,10 @@ import time
 
 import numpy as np
 
-from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.cache import VerdictCache
 from intuitf.evaluator.mllm import MLLMJudge
 from intuitf.evaluator.types import Intent
+from intuitf.intent.aspects import aspects_for
 from intuitf.testing.fake_mllm import FakeMLLMServer
 
 

@@ -47,12 +47,12 @@ import numpy as np
 from PIL import Image
 from scipy.stats import kendalltau
 
-from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.cache import VerdictCache
 from intuitf.evaluator.metric import MetricJudge
 from intuitf.evaluator.mllm import MLLMJudge
 from intuitf.evaluator.tournament import SwissTournament
 from intuitf.evaluator.types import Intent
+from intuitf.intent.aspects import aspects_for
 from intuitf.testing.fake_mllm import FakeMLLMServer, TargetOracle
 
 SIZE = 64

@@ -11,11 +11,11 @@ import pytest
 
 from intuitf.batch.budget import BatchLedger, SharedBudget, attach_shared_budget
 from intuitf.errors import BudgetExhausted
-from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.budget import Budget
 from intuitf.evaluator.mllm import MLLMJudge
 from intuitf.evaluator.pricing import PriceTable
 from intuitf.evaluator.types import Intent
+from intuitf.intent.aspects import aspects_for
 from intuitf.testing.fake_mllm import FakeMLLMServer
 
 

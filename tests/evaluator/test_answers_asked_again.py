@@ -12,11 +12,11 @@ import asyncio
 import numpy as np
 import pytest
 
-from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.cache import VerdictCache
 from intuitf.evaluator.mllm import MLLMJudge
 from intuitf.evaluator.tournament import MatchRecord, MatchStats, SwissTournament
 from intuitf.evaluator.types import Choice, Intent, Verdict
+from intuitf.intent.aspects import aspects_for
 from intuitf.testing.fake_mllm import FAULT_KINDS, FakeMLLMServer
 
 Q = aspects_for("quality")

@@ -7,10 +7,10 @@ import sqlite3
 
 import numpy as np
 
-from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.cache import VerdictCache, request_key
 from intuitf.evaluator.mllm import MLLMJudge
 from intuitf.evaluator.types import Choice, Intent
+from intuitf.intent.aspects import aspects_for
 from intuitf.testing.fake_mllm import FakeMLLMServer
 
 Q = aspects_for("quality")

@@ -210,9 +210,9 @@ def test_features_are_cached_by_content():
 
 def test_text_modifiers_apply_to_their_own_colour():
     """'opaque ivory bone, faint red skin': a faint red layer over solid ivory beats solid red."""
-    from intuitf.intent.aspects import aspects_for
     from intuitf.evaluator.metric import MetricJudge
     from intuitf.evaluator.types import Choice, Intent
+    from intuitf.intent.aspects import aspects_for
 
     yy, xx = np.mgrid[0:96, 0:96]
     body = (xx - 48) ** 2 + (yy - 48) ** 2 < 40**2

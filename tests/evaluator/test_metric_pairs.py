@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.metric import MetricJudge
 from intuitf.evaluator.metric_quality import quality
 from intuitf.evaluator.types import Choice, Intent
 from intuitf.imageio import load_image
+from intuitf.intent.aspects import aspects_for
 
 PAIRS = Path(__file__).resolve().parents[1] / "data" / "judge_pairs"
 

@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 from intuitf.errors import BudgetExhausted, IntuitfError, JudgeError
-from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.budget import (
     Budget,
     reset_spend,
@@ -33,6 +32,7 @@ from intuitf.evaluator.providers import (
     redact_url,
 )
 from intuitf.evaluator.types import Cost, Intent
+from intuitf.intent.aspects import aspects_for
 from intuitf.testing.fake_mllm import FakeMLLMServer
 
 Q = aspects_for("quality")

@@ -14,12 +14,12 @@ import pytest
 from scipy.stats import kendalltau
 
 from intuitf.errors import BudgetExhausted
-from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.budget import Budget
 from intuitf.evaluator.cache import VerdictCache
 from intuitf.evaluator.mllm import MLLMJudge
 from intuitf.evaluator.tournament import SwissTournament
 from intuitf.evaluator.types import Intent
+from intuitf.intent.aspects import aspects_for
 from intuitf.testing.fake_mllm import FAULT_KINDS, FakeMLLMServer
 
 

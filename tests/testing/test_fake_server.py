@@ -11,10 +11,10 @@ import httpx
 import numpy as np
 import pytest
 
-from intuitf.intent.aspects import aspects_for
 from intuitf.evaluator.compose import comparison_images, content_parts
 from intuitf.evaluator.prompts import response_format, user_prompt
 from intuitf.evaluator.types import Intent
+from intuitf.intent.aspects import aspects_for
 from intuitf.testing.fake_mllm import FakeMLLMServer, Latency, main
 
 

@@ -12,8 +12,8 @@ from rich.table import Table
 
 from intuitf.errors import IntuitfError
 from intuitf.evaluator.agreement import evaluate_agreement, parse_pairs
-from intuitf.intent.aspects import aspects_for, builtin_catalogue
 from intuitf.evaluator.types import Intent
+from intuitf.intent.aspects import aspects_for, builtin_catalogue
 
 
 def _image_loader(folder: Path):

@@ -6,10 +6,6 @@ from intuitf._lazy import lazy_exports
 
 if TYPE_CHECKING:  # the names below, for type checkers and editors
     from intuitf.evaluator.agreement import agreement_score as agreement_score
-    from intuitf.intent.aspects import AspectCatalogue as AspectCatalogue
-    from intuitf.intent.aspects import aspects_for as aspects_for
-    from intuitf.intent.aspects import aspects_for_intent as aspects_for_intent
-    from intuitf.intent.aspects import load_aspects as load_aspects
     from intuitf.evaluator.budget import Budget as Budget
     from intuitf.evaluator.cache import VerdictCache as VerdictCache
     from intuitf.evaluator.factory import make_judge as make_judge
@@ -20,6 +16,10 @@ if TYPE_CHECKING:  # the names below, for type checkers and editors
     from intuitf.evaluator.tournament import MatchRecord as MatchRecord
     from intuitf.evaluator.tournament import SwissTournament as SwissTournament
     from intuitf.evaluator.tournament import TournamentResult as TournamentResult
+    from intuitf.intent.aspects import AspectCatalogue as AspectCatalogue
+    from intuitf.intent.aspects import aspects_for as aspects_for
+    from intuitf.intent.aspects import aspects_for_intent as aspects_for_intent
+    from intuitf.intent.aspects import load_aspects as load_aspects
 
 _EXPORTS = {
     "agreement_score": "intuitf.evaluator.agreement",

@@ -423,7 +423,12 @@ def create_app(
         )
 
     for module in (
-        routes_info, routes_volumes, routes_texture, routes_runs, routes_candidates, view_socket
+        routes_info,
+        routes_volumes,
+        routes_texture,
+        routes_runs,
+        routes_candidates,
+        view_socket,
     ):
         app.include_router(module.router)
 
