@@ -80,12 +80,12 @@ class WebServer:
                 raise AssertionError(f"run {name} still going after {timeout} s: {d['info']}")
             time.sleep(0.3)
 
-    def start_run(self, text: str, **settings) -> str:
+    def start_run(self, text: str, judge: str = "metric", **settings) -> str:
         """A run started through the API (for tests about something else than starting)."""
         spec = {
             "volume": "phantom",
             "intent": {"kind": "text", "text": text},
-            "judge": {"spec": "metric"},
+            "judge": {"spec": judge},
             "settings": {"population": 6, "generations": 2, "image_size": 64, **settings},
         }
         return self.api("POST", "/api/runs", spec)["name"]

@@ -221,7 +221,17 @@ def test_candidate_address_loads_without_the_phantom(browser, web_server):
 
 # -- 5: a reloaded page follows its live run, and the run's end shows at once --------------------
 def test_reloaded_page_follows_a_live_run_to_its_end(browser, web_server):
-    name = web_server.start_run("white bone", generations=3)
+    from intuitf.testing.fake_mllm import FakeMLLMServer
+
+    # A model judge slow enough (0.4 s a comparison) that a generation takes seconds: the run
+    # is still going when the test pauses it after its first generation, however fast the
+    # machine (with the metric judge the whole run could end between two polls).
+    with FakeMLLMServer(score=lambda im: float(np.mean(im)), latency=0.4) as srv:
+        _follow_a_live_run(browser, web_server, srv.base_url)
+
+
+def _follow_a_live_run(browser, web_server, judge: str) -> None:
+    name = web_server.start_run("white bone", judge=judge, generations=3)
     d = wait_gallery(web_server, name)
     web_server.api("POST", f"/api/runs/{name}/pause")
     first = d["gallery"][0]["qid"]

@@ -126,11 +126,21 @@ def _print_summary(outcome, session, started: float) -> None:
         table.add_row(str(i), f"{rating:.0f}", desc)
     console.print(table)
     c = outcome.cost
+    # The run's cost counts requests of unknown fate (a killed process recorded them before
+    # sending; some may never have left it), as its budget does; the summary names them apart
+    # so that "paid" is only what was answered.
+    lost_calls, lost_usd = _lost_requests(outcome)
     console.print(
-        f"{outcome.generations_done} generation(s), {c.calls} paid call(s), {c.cached_calls} from cache, "
-        f"{c.input_tokens + c.output_tokens} tokens, ${c.usd:.4f}, {time.perf_counter() - started:.1f} s."
+        f"{outcome.generations_done} generation(s), {max(0, c.calls - lost_calls)} paid call(s), "
+        f"{c.cached_calls} from cache, {c.input_tokens + c.output_tokens} tokens, "
+        f"${max(0.0, c.usd - lost_usd):.4f}, {time.perf_counter() - started:.1f} s."
     )
-    _print_lost_requests(outcome)
+    if lost_calls:
+        console.print(
+            f"…plus {lost_calls} request(s) a stopped process recorded without seeing the answer "
+            f"(about ${lost_usd:.4f}): the server may have seen and billed them, so the budget "
+            "counts them."
+        )
     _print_match_stats(outcome)
     if outcome.run_dir is not None:
         color = "green" if outcome.completed else "yellow"
@@ -465,18 +475,13 @@ def _where(session) -> str:
     return redact_url(j.spec) + (f" at {redact_url(j.base_url)}" if j.base_url else "")
 
 
-def _print_lost_requests(outcome) -> None:
-    """Requests a killed process sent but never saw answered: the server saw (and may bill)
-    them, and the budget counts them, so the summary says so too."""
+def _lost_requests(outcome) -> tuple[int, float]:
+    """Requests a killed process recorded but never saw answered, and their estimated price."""
     store = outcome.run_dir / "verdicts.sqlite" if outcome.run_dir is not None else None
     if store is None or not store.exists():
-        return
+        return 0, 0.0
     from intuitf.evaluator.cache import VerdictCache
 
     with VerdictCache(store) as cache:
         calls, usd = cache.unsettled()
-    if calls:
-        console.print(
-            f"…plus {calls} request(s) a stopped process sent without seeing the answer "
-            f"(about ${usd:.4f}); the budget counts them."
-        )
+    return int(calls), float(usd)
