@@ -50,6 +50,14 @@ class RunLocked(SessionError):
     """Another process (or another session in this one) drives the run folder."""
 
 
+class RunBusy(SessionError):
+    """The run is going already (a front end asked to start it a second time)."""
+
+
+class TooManyRuns(SessionError):
+    """As many runs are going as the server allows; another waits until one ends."""
+
+
 class StorageError(SessionError):
     """The run folder cannot be read or written: missing, corrupt, unwritable or a full disk.
     Everything written before it stays; the run continues with a resume once it is fixed."""

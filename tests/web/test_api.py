@@ -360,7 +360,7 @@ def test_query_on_a_live_run_starts_a_stage_at_the_next_boundary(client):
 
 
 def test_a_run_that_fails_says_so_in_its_events(client, monkeypatch):
-    from intuitf.web.runs import LiveSession
+    from intuitf.session.live import LiveSession
 
     async def broken(self):
         raise RuntimeError("kaboom")
@@ -379,3 +379,24 @@ def test_a_run_that_fails_says_so_in_its_events(client, monkeypatch):
                 break
     assert '"reason":"error"' in body and "kaboom" in body
     assert client.get("/api/info").status_code == 200  # the server goes on
+
+
+def test_a_run_beyond_the_servers_limit_is_a_429_and_writes_nothing(tmp_path):
+    app = make_app(tmp_path / "runs", max_live_runs=1)
+    with TestClient(app, headers=AUTH) as c:
+        first = c.post("/api/runs", json={"volume": "phantom", "settings": {"generations": 50}})
+        assert first.status_code == 201, first.text
+        name = first.json()["name"]
+        assert c.post(f"/api/runs/{name}/pause").status_code == 200  # it stays going
+        before = sorted(p.name for p in (tmp_path / "runs").iterdir())
+        second = c.post("/api/runs", json={"volume": "phantom", "name": "second"})
+        assert second.status_code == 429, second.text
+        body = second.json()
+        assert body["detail"].startswith("1 run is going already")
+        assert "pause or stop one" in body["hint"]
+        assert sorted(p.name for p in (tmp_path / "runs").iterdir()) == before
+        # The run going already cannot be continued a second time: a 409.
+        again = c.post(f"/api/runs/{name}/continue", json={})
+        assert again.status_code == 409, again.text
+        assert c.post(f"/api/runs/{name}/cancel").status_code == 200
+        wait_run(c, name)

@@ -1,7 +1,7 @@
 """Runs for agents: start, follow, steer, judge, pick, refine, branch.
 
 Every run is a :class:`~intuitf.session.Session` in a folder under ``--runs``, driven by the
-web app's :class:`~intuitf.web.runs.RunRegistry`: its own thread and event loop, changes handed
+web app's :class:`~intuitf.session.live.RunRegistry`: its own thread and event loop, changes handed
 to it between matches, closed (folder lock released) when it ends and reopened with
 :meth:`Session.resume` when changed again. Tools return at once; :meth:`RunDesk.wait` waits for
 the next generation without holding up anything else.
@@ -149,8 +149,8 @@ class RunDesk:
         start_from_tf: bool,
         name: str | None,
     ) -> Reply:
+        from intuitf.session.live import LiveSession
         from intuitf.session.spec import parse_spec
-        from intuitf.web.runs import LiveSession
 
         svc = self.svc
         ov = svc.shelf.get(volume_id)
@@ -200,7 +200,7 @@ class RunDesk:
             raise
 
     async def _reopen(self, name: str, *, for_verdict: bool = False, **kw):
-        from intuitf.web.runs import LiveSession
+        from intuitf.session.live import LiveSession
 
         await self.registry.wait_released(name)
         record = await asyncio.to_thread(self.record, name)
@@ -311,7 +311,7 @@ class RunDesk:
 
     # -- control --------------------------------------------------------------------------
     async def control(self, name: str, action: str) -> Reply:
-        from intuitf.web.runs import NotLive
+        from intuitf.session.live import NotLive
 
         self.check_run(name)
         live = self._live(name)
@@ -329,7 +329,7 @@ class RunDesk:
         return _reply({"run": name, "status": status, "paused": action == "pause"})
 
     async def continue_run(self, name, budget_usd, budget_calls, judge: str | None) -> Reply:
-        from intuitf.web.runs import NotLive
+        from intuitf.session.live import NotLive
 
         self.check_run(name)
         live = self._live(name)
@@ -356,7 +356,7 @@ class RunDesk:
 
     # -- the gallery ----------------------------------------------------------------------
     async def gallery(self, name: str, k: int, size: int, pictures: bool) -> Reply:
-        from intuitf.web.runs import NotLive
+        from intuitf.session.live import NotLive
 
         self.check_run(name)
         k = max(1, min(int(k), 16))
@@ -429,7 +429,7 @@ class RunDesk:
 
     # -- a person's (an agent's) verdicts ---------------------------------------------------
     async def human(self, name: str, fn) -> Reply:
-        from intuitf.web.runs import NotLive
+        from intuitf.session.live import NotLive
 
         self.check_run(name)
         live = self._live(name)
@@ -596,8 +596,8 @@ class RunDesk:
 
     async def query(self, name: str, intent: Any, generations: int | None) -> Reply:
         from intuitf.session.building import load_intent
+        from intuitf.session.live import NotLive
         from intuitf.session.spec import IntentSpec
-        from intuitf.web.runs import NotLive
 
         self.check_run(name)
         data = self.intent_data(intent)
@@ -661,7 +661,7 @@ class RunDesk:
                        "candidate": cid})  # fmt: skip
 
     async def _branch(self, name, base_name, generation, cid, changes) -> str:
-        from intuitf.web.runs import LiveSession
+        from intuitf.session.live import LiveSession
 
         self.registry.check_capacity()
         ov, _ = await asyncio.to_thread(self.volume_of, name)

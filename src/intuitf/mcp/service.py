@@ -2,7 +2,7 @@
 
 :class:`McpService` holds the roots, the open volumes (:mod:`.volumes`), the run store
 (:class:`~intuitf.session.RunStore`) and the registry of live runs the web app uses
-(:class:`~intuitf.web.runs.RunRegistry`: each run's Session on its own thread and event loop,
+(:class:`~intuitf.session.live.RunRegistry`: each run's Session on its own thread and event loop,
 so that no run ever holds up the server). The tools in :mod:`.tools` only turn arguments into
 calls here and results into MCP content. Pictures, transfer functions and exports are here;
 runs are in :mod:`.runs`.
@@ -78,7 +78,7 @@ class McpService:
 
     def __init__(self, config: McpConfig) -> None:
         from intuitf.session import RunStore
-        from intuitf.web.runs import RunRegistry
+        from intuitf.session.live import RunRegistry
 
         self.config = config
         self.roots = config.roots

@@ -111,8 +111,7 @@ class Results:
         return CallToolResult(content=content, structured_content=json.loads(text))
 
     async def run(self, call: Callable[[], Awaitable[Reply] | Reply], fmt: str = "auto"):
-        from intuitf.web.common import ApiError
-        from intuitf.web.runs import NotLive
+        from intuitf.session.live import NotLive
 
         try:
             reply = call()
@@ -127,8 +126,6 @@ class Results:
             raise ToolError(self.scrub(str(exc))) from None
         except IntuitfError as exc:
             raise ToolError(self.scrub(_message(exc.message, exc.hint))) from None
-        except ApiError as exc:  # the run registry's limits (too many runs, a run going already)
-            raise ToolError(self.scrub(_message(exc.detail, exc.hint))) from None
         except NotLive as exc:
             raise ToolError(f"The run {exc} is not going any more.") from None
         except Exception as exc:  # a bug: say so briefly, keep serving, log it (keys blanked)

@@ -22,10 +22,10 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from intuitf.errors import IntuitfError
+from intuitf.errors import IntuitfError, RunBusy, RunLocked, TooManyRuns
 from intuitf.session import RunStore
+from intuitf.session.live import RunRegistry
 from intuitf.web.common import ApiError
-from intuitf.web.runs import RunRegistry
 from intuitf.web.security import DEFAULT_HOSTS, SecurityMiddleware, new_token
 from intuitf.web.uploads import PictureStore
 from intuitf.web.volumes import VolumeCatalog
@@ -381,6 +381,15 @@ def create_app(
     @app.exception_handler(IntuitfError)
     async def _user_error(request: Request, exc: IntuitfError):
         return _error_response(422, exc.message, exc.hint)
+
+    @app.exception_handler(RunBusy)
+    @app.exception_handler(RunLocked)
+    async def _conflict(request: Request, exc: IntuitfError):
+        return _error_response(409, exc.message, exc.hint)
+
+    @app.exception_handler(TooManyRuns)
+    async def _too_many(request: Request, exc: TooManyRuns):
+        return _error_response(429, exc.message, exc.hint)
 
     @app.exception_handler(RequestValidationError)
     async def _invalid(request: Request, exc: RequestValidationError):

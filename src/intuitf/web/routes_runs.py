@@ -11,7 +11,8 @@ from fastapi import APIRouter, Header, Query, Request
 from fastapi.responses import FileResponse, Response, StreamingResponse
 from pydantic import BaseModel, ConfigDict, Field
 
-from intuitf.errors import IntuitfError
+from intuitf.errors import IntuitfError, RunLocked
+from intuitf.session.live import LiveSession, NotLive
 from intuitf.session.scheduler import INTERACTIVE, render_scheduler
 from intuitf.web.common import (
     ApiError,
@@ -22,7 +23,6 @@ from intuitf.web.common import (
     state,
     user_error,
 )
-from intuitf.web.runs import LiveSession, NotLive
 from intuitf.web.schema import COMMON
 
 router = APIRouter(prefix="/api", tags=["runs"], responses=COMMON)
@@ -316,8 +316,10 @@ async def _reopen(web, name: str, *, for_verdict: bool = False, **kw) -> LiveSes
         judge = MetricJudge()
     try:
         return await asyncio.to_thread(LiveSession.resume, run_dir, volume, judge, **kw)
+    except RunLocked as exc:  # another process drives its folder
+        raise ApiError(409, exc.message, exc.hint) from None
     except IntuitfError as exc:
-        raise ApiError(409 if "in use" in exc.message else 422, exc.message, exc.hint) from None
+        raise ApiError(422, exc.message, exc.hint) from None
 
 
 async def _start(web, session: LiveSession) -> str:

@@ -1,4 +1,5 @@
-"""The runs this server drives: name → live session, each on a thread of its own.
+"""The runs a server drives (the web app, the MCP server): name → live session, each on a
+thread of its own.
 
 A live run's session runs ``arun()`` on its own thread and event loop, so nothing a run does
 (a metric judge's arithmetic, writing its journal and pictures) ever holds up the server's
@@ -20,9 +21,11 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from intuitf.session import Session
+from intuitf.errors import RunBusy, TooManyRuns
+from intuitf.session.events import RunEvent
+from intuitf.session.records import GenerationRecord, RunOutcome
 from intuitf.session.scheduler import BATCH, render_scheduler
-from intuitf.web.common import ApiError
+from intuitf.session.session import Session
 
 log = logging.getLogger(__name__)
 
@@ -57,7 +60,7 @@ class LiveSession(Session):
             except Exception as exc:  # a query that fails later is reported, not raised
                 log.warning("deferred change to %s failed: %s", self.name, exc)
 
-    async def astep(self):
+    async def astep(self) -> GenerationRecord:
         self.run_deferred()
         self._in_step = True
         try:
@@ -76,7 +79,7 @@ class Progress:
         self.seconds: list[float] = []
         self.last_error: str | None = None
 
-    def __call__(self, e) -> None:
+    def __call__(self, e: RunEvent) -> None:
         from intuitf.evaluator.tournament import default_rounds
 
         d = e.data
@@ -126,7 +129,7 @@ class LiveRun:
         self.thread: threading.Thread | None = None
         self.state = "starting"  # starting | running | closing | closed
         self._calls = 0  # changes handed to the run's loop and not yet done
-        self.outcome = None
+        self.outcome: RunOutcome | None = None
         self.started = time.time()
         self._closed_waiters: list[tuple[asyncio.AbstractEventLoop, asyncio.Future]] = []
 
@@ -165,7 +168,7 @@ class LiveRun:
         try:
             while True:
                 try:
-                    self.outcome = await s.arun(write_outputs=False)
+                    outcome = self.outcome = await s.arun(write_outputs=False)
                 except Exception as exc:  # a bug, not a run condition: say so, then close
                     log.exception("run %s failed", self.name)
                     with self._lock:
@@ -179,7 +182,7 @@ class LiveRun:
                     with self._lock:
                         if self._calls == 0:
                             s.run_deferred()
-                            go_on = self.outcome.reason == "completed" and not s.done
+                            go_on = outcome.reason == "completed" and not s.done
                             if not go_on:
                                 self.state = "closing"
                             break
@@ -210,7 +213,7 @@ class LiveRun:
                 raise NotLive(self.name)
             self._calls += 1
 
-            async def job():
+            async def job() -> Any:
                 try:
                     return fn()
                 finally:
@@ -298,9 +301,9 @@ class RunRegistry:
 
     def check_capacity(self) -> None:
         if len(self.names()) >= self.max_live:
-            raise ApiError(
-                429,
-                f"{self.max_live} runs are going already.",
+            going = "1 run is" if self.max_live == 1 else f"{self.max_live} runs are"
+            raise TooManyRuns(
+                f"{going} going already (the most this server drives at once).",
                 "Wait for one to finish, or pause or stop one.",
             )
 
@@ -312,7 +315,7 @@ class RunRegistry:
         with self._lock:
             old = self._runs.get(name)
             if old is not None and old.state in ("running", "starting"):
-                raise ApiError(409, f"The run {name!r} is going already.")
+                raise RunBusy(f"The run {name!r} is going already.")
             run = LiveRun(name, session, self._closed)
             self._runs[name] = run
         run.start()
