@@ -107,6 +107,7 @@ def server_stills(ws_url: str, target: dict, size: int, n: int) -> list[float]:
 #: In the page: the renderer drawing the current TF from turning cameras at one size.
 FRAMES_JS = """async ({size, n, shading}) => {
   const g = window.intuitfDebug.gl.renderer();
+  await g.gradientReady;  // shaded frames use the gradient texture once it is built
   const S = await import('/static/state.js');
   const tf = S.shownTF();
   const cam = {...window.intuitfDebug.state.camera, pan: [0, 0]};
@@ -122,6 +123,7 @@ FRAMES_JS = """async ({size, n, shading}) => {
 #: In the page: a hand edit (height and colour of one Gaussian), then one frame, n times.
 EDIT_JS = """async ({size, n}) => {
   const g = window.intuitfDebug.gl.renderer();
+  await g.gradientReady;  // shaded frames use the gradient texture once it is built
   const S = await import('/static/state.js');
   const base = S.shownTF();
   const cam = {...window.intuitfDebug.state.camera, pan: [0, 0]};
@@ -141,6 +143,7 @@ EDIT_JS = """async ({size, n}) => {
 #: In the page: every sample visible, no early end; the frame's time.
 DENSE_JS = """async ({size, shading, camera}) => {
   const g = window.intuitfDebug.gl.renderer();
+  await g.gradientReady;  // shaded frames use the gradient texture once it is built
   const tf = {gaussians: [{mean: 0.5, width: 0.5, height: 0.001, color: [0.8, 0.8, 0.8]}]};
   g.render({tf, camera, width: size, height: size, shading});
   const ms = [];

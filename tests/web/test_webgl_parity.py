@@ -102,9 +102,10 @@ PAGE_RENDER = """async ({id, tf, camera, size, shadings, picks}) => {
   const r = new R.GLVolumeRenderer();
   const vol = await V.fetchVolume(id, r.limits());
   await r.setVolume(vol, await V.blockRanges(vol));
+  const gradient = await r.gradientReady;  // shade from the gradient texture, as frames do
   const b64 = (a) => { let s = ''; for (let i = 0; i < a.length; i += 32768)
     s += String.fromCharCode.apply(null, a.subarray(i, i + 32768)); return btoa(s); };
-  const out = {gpu: r.gpu, format: vol.format, images: {}, picks: []};
+  const out = {gpu: r.gpu, format: vol.format, gradient, images: {}, picks: []};
   for (const shading of shadings) {
     r.render({tf, camera, width: size, height: size, shading});
     out.images[shading ? 'shaded' : 'unshaded'] = b64(r.readRGB());
@@ -158,6 +159,7 @@ def test_page_matches_server(server, gl_page, name):
     )
     assert not gl_page.errors, gl_page.errors
     report = {"volume": name, "gpu": got["gpu"], "format": got["format"]}
+    assert got["gradient"] is True  # every case fits the page's gradient texture
     for shading in (True, False):
         server_img = VolumeRenderer(volume, size=SIZE, shading=shading, device="cpu").render(
             tf, cam

@@ -10,7 +10,11 @@
 import { extentOf, frame } from "./gl_camera.js";
 import { RENDER, VERTEX, attributeSource } from "./gl_shaders.js";
 import { occupancy, tfKey, tfLut } from "./gl_tf.js";
-import { visibleBlocks } from "./gl_volume.js";
+import { gradientSlab, visibleBlocks } from "./gl_volume.js";
+
+/** Largest gradient texture (RGB half floats, 6 bytes a voxel) the page builds; beyond it the
+ * shader takes central differences of the volume texture itself (same picture, slower). */
+const MAX_GRADIENT_BYTES = 192 * 1024 * 1024;
 
 export const DEFAULTS = Object.freeze({
   sampleDistance: 0.5,
@@ -91,6 +95,14 @@ export class GLVolumeRenderer {
     this.lutTex = gl.createTexture();
     this.visTex = gl.createTexture();
     this.volTex = null;
+    // Until a volume's gradient texture is built, shading differentiates the volume texture;
+    // a 1-voxel stand-in keeps the sampler bound.
+    this.noGrad = gl.createTexture();
+    gl.bindTexture(gl.TEXTURE_3D, this.noGrad);
+    gl.texStorage3D(gl.TEXTURE_3D, 1, gl.RGB16F, 1, 1, 1);
+    this.gradTex = null;
+    /** Resolves when the current volume's gradient texture is in use (or will not be built). */
+    this.gradientReady = Promise.resolve(false);
     this.lutState = { key: "", n: 0, occ: null };
     this.vis = null;
   }
@@ -150,6 +162,53 @@ export class GLVolumeRenderer {
     const m = Math.min(...vol.spacing);
     this.invSpacing = vol.spacing.map((s) => m / s);
     this.lutState = { key: "", n: 0, occ: null };
+    if (this.gradTex) gl.deleteTexture(this.gradTex);
+    this.gradTex = null;
+    this.gradientReady = this._buildGradient(vol);
+  }
+
+  /**
+   * The volume's gradient as an RGB half-float texture, built a few slices per task after the
+   * volume is shown: a shaded sample then costs one texture fetch for its normal instead of
+   * six (the server's precomputed gradient, trilinearly filtered, as its kernels do). Resolves
+   * to whether frames now use it.
+   */
+  async _buildGradient(vol) {
+    const gl = this.gl;
+    const [nx, ny, nz] = vol.dims;
+    if (nx * ny * nz * 6 > MAX_GRADIENT_BYTES) return false;
+    const tex = gl.createTexture();
+    gl.bindTexture(gl.TEXTURE_3D, tex);
+    gl.texStorage3D(gl.TEXTURE_3D, 1, gl.RGB16F, nx, ny, nz);
+    const slab = Math.max(1, Math.floor((4 * 1024 * 1024) / (nx * ny)));
+    const buf = new Uint16Array(Math.min(slab, nz) * nx * ny * 3);
+    for (let z = 0; z < nz; z += slab) {
+      await new Promise((r) => setTimeout(r, 0));
+      if (this.volume !== vol) {
+        gl.deleteTexture(tex);
+        return false;
+      }
+      const d = Math.min(slab, nz - z);
+      const part = buf.subarray(0, d * nx * ny * 3);
+      gradientSlab(vol, z, z + d, part);
+      gl.bindTexture(gl.TEXTURE_3D, tex);
+      gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
+      gl.texSubImage3D(gl.TEXTURE_3D, 0, 0, 0, z, nx, ny, d, gl.RGB, gl.HALF_FLOAT, part);
+    }
+    for (const [k, v] of [
+      [gl.TEXTURE_MIN_FILTER, gl.LINEAR],
+      [gl.TEXTURE_MAG_FILTER, gl.LINEAR],
+      [gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE],
+      [gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE],
+      [gl.TEXTURE_WRAP_R, gl.CLAMP_TO_EDGE],
+    ])
+      gl.texParameteri(gl.TEXTURE_3D, k, v);
+    if (this.volume !== vol) {
+      gl.deleteTexture(tex);
+      return false;
+    }
+    this.gradTex = tex;
+    return true;
   }
 
   /** Make the LUT and block-visibility textures current for `tf` (cheap when unchanged). */
@@ -191,6 +250,12 @@ export class GLVolumeRenderer {
     gl.activeTexture(gl.TEXTURE2);
     gl.bindTexture(gl.TEXTURE_2D, this.lutTex);
     gl.uniform1i(u.u_lut, 2);
+    if (u.u_grad) {
+      gl.activeTexture(gl.TEXTURE4);
+      gl.bindTexture(gl.TEXTURE_3D, this.gradTex || this.noGrad);
+      gl.uniform1i(u.u_grad, 4);
+      gl.uniform1i(u.u_gradTex, this.gradTex ? 1 : 0);
+    }
     gl.uniform3f(u.u_dims, vol.dims[0], vol.dims[1], vol.dims[2]);
     gl.uniform3f(u.u_invDims, 1 / vol.dims[0], 1 / vol.dims[1], 1 / vol.dims[2]);
     gl.uniform3i(u.u_nb, this.blocks.nb[0], this.blocks.nb[1], this.blocks.nb[2]);

@@ -5,8 +5,9 @@
 // box entry, trilinear value (the texture's linear filter), post-classification with linear
 // interpolation between LUT entries, front-to-back premultiplied compositing, early ray
 // termination at T < 1/255, empty-space skipping over 8³ blocks that keeps the sample grid,
-// and Blinn–Phong with a two-sided headlight from the central difference of the trilinear
-// field at ±1 voxel (what the server's interpolated precomputed gradient equals inside the box).
+// and Blinn–Phong with a two-sided headlight from the gradient: the server's precomputed
+// central differences as a texture, trilinearly filtered, once the page has built it (until
+// then the central difference of the trilinear field at ±1 voxel, which equals it inside the box).
 
 export const VERTEX = `#version 300 es
 void main() {
@@ -105,6 +106,8 @@ export const RENDER = `#version 300 es
 ${COMMON}
 uniform vec4 u_shade;      // ambient, diffuse, specular, shininess
 uniform int u_shading;
+uniform sampler3D u_grad;  // RGB16F gradient (normalised units per voxel), linear filter
+uniform int u_gradTex;     // 1: shade from u_grad, 0: central differences of u_vol
 uniform vec3 u_bg;
 uniform int u_alphaOut;    // 1: premultiplied RGBA (for compositing in the page), 0: over u_bg
 out vec4 outColor;
@@ -146,10 +149,16 @@ void main() {
       if (a > 0.0) {
         vec3 c = e.rgb;
         if (u_shading == 1) {
-          vec3 g = 0.5 * vec3(
-            value(p + vec3(1.0, 0.0, 0.0)) - value(p - vec3(1.0, 0.0, 0.0)),
-            value(p + vec3(0.0, 1.0, 0.0)) - value(p - vec3(0.0, 1.0, 0.0)),
-            value(p + vec3(0.0, 0.0, 1.0)) - value(p - vec3(0.0, 0.0, 1.0))) * u_is;
+          vec3 g;
+          if (u_gradTex == 1) {
+            vec3 pc = clamp(p, vec3(0.0), u_dims - 1.0);
+            g = textureLod(u_grad, (pc + 0.5) * u_invDims, 0.0).rgb * u_is;
+          } else {
+            g = 0.5 * vec3(
+              value(p + vec3(1.0, 0.0, 0.0)) - value(p - vec3(1.0, 0.0, 0.0)),
+              value(p + vec3(0.0, 1.0, 0.0)) - value(p - vec3(0.0, 1.0, 0.0)),
+              value(p + vec3(0.0, 0.0, 1.0)) - value(p - vec3(0.0, 0.0, 1.0))) * u_is;
+          }
           float m = length(g);
           float ndl = 1.0;
           float sp = 0.0;
