@@ -8,13 +8,13 @@
 // diffuse 0.7, specular 0.25, shininess 24, early stop at T < 1/255.
 
 import { extentOf, frame } from "./gl_camera.js";
-import { RENDER, VERTEX, attributeSource } from "./gl_shaders.js";
+import { VERTEX, attributeSource, renderSource } from "./gl_shaders.js";
 import { occupancy, tfKey, tfLut } from "./gl_tf.js";
-import { gradientSlab, visibleBlocks } from "./gl_volume.js";
+import { gradientCoding, gradientSlab, visibleBlocks } from "./gl_volume.js";
 
-/** Largest gradient texture (RGB half floats, 6 bytes a voxel) the page builds; beyond it the
- * shader takes central differences of the volume texture itself (same picture, slower). */
-const MAX_GRADIENT_BYTES = 192 * 1024 * 1024;
+/** Largest gradient texture (RGBA8, 4 bytes a voxel) the page builds; beyond it shading takes
+ * central differences of the volume texture itself (the same picture, slower). */
+const MAX_GRADIENT_BYTES = 256 * 1024 * 1024;
 
 export const DEFAULTS = Object.freeze({
   sampleDistance: 0.5,
@@ -88,20 +88,18 @@ export class GLVolumeRenderer {
     this.floatLinear = !!gl.getExtension("OES_texture_float_linear");
     this.maxTexture = gl.getParameter(gl.MAX_TEXTURE_SIZE);
     this.render = this.render.bind(this);
-    this.progRender = program(gl, VERTEX, RENDER);
+    this.progRender = {}; // per kind of picture (renderSource), compiled on first use
+    this._program({ shading: true, gradient: false }); // fails here, not at the first frame
     this.progAttr = {}; // per number of targets, compiled on the first pick that needs it
     this.vao = gl.createVertexArray();
     this.volume = null;
     this.lutTex = gl.createTexture();
     this.visTex = gl.createTexture();
     this.volTex = null;
-    // Until a volume's gradient texture is built, shading differentiates the volume texture;
-    // a 1-voxel stand-in keeps the sampler bound.
-    this.noGrad = gl.createTexture();
-    gl.bindTexture(gl.TEXTURE_3D, this.noGrad);
-    gl.texStorage3D(gl.TEXTURE_3D, 1, gl.RGB16F, 1, 1, 1);
+    // Until a volume's gradient texture is built, shading differentiates the volume texture.
     this.gradTex = null;
-    /** Resolves when the current volume's gradient texture is in use (or will not be built). */
+    this.gradCode = null;
+    /** Resolves when the current volume's gradient texture is in use (true) or will not be. */
     this.gradientReady = Promise.resolve(false);
     this.lutState = { key: "", n: 0, occ: null };
     this.vis = null;
@@ -167,21 +165,36 @@ export class GLVolumeRenderer {
     this.gradientReady = this._buildGradient(vol);
   }
 
+  /** The render program for `kind` ({shading, gradient}), compiled once. */
+  _program(kind) {
+    const key = `${kind.shading ? "s" : "u"}${kind.gradient ? "g" : "d"}${kind.packed ? "p" : ""}`;
+    if (!this.progRender[key]) this.progRender[key] = program(this.gl, VERTEX, renderSource(kind));
+    return this.progRender[key];
+  }
+
+  _renderProgram(shading) {
+    const gradient = shading && !!this.gradTex;
+    return this._program({ shading, gradient, packed: gradient && this.volume.format === "r8" });
+  }
+
   /**
-   * The volume's gradient as an RGB half-float texture, built a few slices per task after the
-   * volume is shown: a shaded sample then costs one texture fetch for its normal instead of
-   * six (the server's precomputed gradient, trilinearly filtered, as its kernels do). Resolves
-   * to whether frames now use it.
+   * The volume's gradient as 8-bit codes in an RGBA8 texture, built a few slices per task
+   * after the volume is shown: a shaded sample then takes its normal from one texture fetch
+   * instead of six (the server's precomputed gradient, trilinearly filtered, as its kernels
+   * do; the codes' step is 1/127 of the volume's largest difference). In software an 8-bit
+   * fetch costs a fraction of a half-float one. Resolves to whether frames now use it.
    */
   async _buildGradient(vol) {
     const gl = this.gl;
     const [nx, ny, nz] = vol.dims;
-    if (nx * ny * nz * 6 > MAX_GRADIENT_BYTES) return false;
+    if (nx * ny * nz * 4 > MAX_GRADIENT_BYTES) return false;
+    const coding = await gradientCoding(vol, () => this.volume === vol);
+    if (!coding || this.volume !== vol) return false;
     const tex = gl.createTexture();
     gl.bindTexture(gl.TEXTURE_3D, tex);
-    gl.texStorage3D(gl.TEXTURE_3D, 1, gl.RGB16F, nx, ny, nz);
-    const slab = Math.max(1, Math.floor((4 * 1024 * 1024) / (nx * ny)));
-    const buf = new Uint16Array(Math.min(slab, nz) * nx * ny * 3);
+    gl.texStorage3D(gl.TEXTURE_3D, 1, gl.RGBA8, nx, ny, nz);
+    const slab = Math.max(1, Math.floor((1024 * 1024) / (nx * ny)));
+    const buf = new Uint8Array(Math.min(slab, nz) * nx * ny * 4);
     for (let z = 0; z < nz; z += slab) {
       await new Promise((r) => setTimeout(r, 0));
       if (this.volume !== vol) {
@@ -189,11 +202,11 @@ export class GLVolumeRenderer {
         return false;
       }
       const d = Math.min(slab, nz - z);
-      const part = buf.subarray(0, d * nx * ny * 3);
-      gradientSlab(vol, z, z + d, part);
+      const part = buf.subarray(0, d * nx * ny * 4);
+      gradientSlab(vol, z, z + d, coding, part);
       gl.bindTexture(gl.TEXTURE_3D, tex);
       gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
-      gl.texSubImage3D(gl.TEXTURE_3D, 0, 0, 0, z, nx, ny, d, gl.RGB, gl.HALF_FLOAT, part);
+      gl.texSubImage3D(gl.TEXTURE_3D, 0, 0, 0, z, nx, ny, d, gl.RGBA, gl.UNSIGNED_BYTE, part);
     }
     for (const [k, v] of [
       [gl.TEXTURE_MIN_FILTER, gl.LINEAR],
@@ -208,6 +221,8 @@ export class GLVolumeRenderer {
       return false;
     }
     this.gradTex = tex;
+    // A texel t (code / 255) is the difference (t - 128/255) · 255 · step, in normalised units.
+    this.gradCode = [128 / 255, 255 * coding.step * coding.toNormalised];
     return true;
   }
 
@@ -250,11 +265,11 @@ export class GLVolumeRenderer {
     gl.activeTexture(gl.TEXTURE2);
     gl.bindTexture(gl.TEXTURE_2D, this.lutTex);
     gl.uniform1i(u.u_lut, 2);
-    if (u.u_grad) {
+    if (u.u_grad && this.gradTex) {
       gl.activeTexture(gl.TEXTURE4);
-      gl.bindTexture(gl.TEXTURE_3D, this.gradTex || this.noGrad);
+      gl.bindTexture(gl.TEXTURE_3D, this.gradTex);
       gl.uniform1i(u.u_grad, 4);
-      gl.uniform1i(u.u_gradTex, this.gradTex ? 1 : 0);
+      gl.uniform2f(u.u_gcode, this.gradCode[0], this.gradCode[1]);
     }
     gl.uniform3f(u.u_dims, vol.dims[0], vol.dims[1], vol.dims[2]);
     gl.uniform3f(u.u_invDims, 1 / vol.dims[0], 1 / vol.dims[1], 1 / vol.dims[2]);
@@ -285,11 +300,10 @@ export class GLVolumeRenderer {
     if (this.canvas.width !== width) this.canvas.width = width;
     if (this.canvas.height !== height) this.canvas.height = height;
     this._useTF(tf, sampleDistance);
-    const prog = this.progRender;
+    const prog = this._renderProgram(shading);
     this._common(prog, { camera, width, height, sampleDistance });
     const u = prog.u;
-    gl.uniform4fv(u.u_shade, DEFAULTS.shade);
-    gl.uniform1i(u.u_shading, shading ? 1 : 0);
+    if (u.u_shade) gl.uniform4fv(u.u_shade, DEFAULTS.shade);
     gl.uniform3f(u.u_bg, background[0], background[1], background[2]);
     gl.uniform1i(u.u_alphaOut, 0);
     gl.bindFramebuffer(gl.FRAMEBUFFER, null);
@@ -323,10 +337,9 @@ export class GLVolumeRenderer {
     gl.texStorage2D(gl.TEXTURE_2D, 1, gl.RGBA8, width, height);
     gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.TEXTURE_2D, t, 0);
     gl.drawBuffers([gl.COLOR_ATTACHMENT0]);
-    const prog = this.progRender;
+    const prog = this._renderProgram(shading);
     this._common(prog, { camera, width, height, sampleDistance });
-    gl.uniform4fv(prog.u.u_shade, DEFAULTS.shade);
-    gl.uniform1i(prog.u.u_shading, shading ? 1 : 0);
+    if (prog.u.u_shade) gl.uniform4fv(prog.u.u_shade, DEFAULTS.shade);
     gl.uniform3f(prog.u.u_bg, 0, 0, 0);
     gl.uniform1i(prog.u.u_alphaOut, 1);
     gl.viewport(0, 0, width, height);

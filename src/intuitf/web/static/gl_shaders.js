@@ -6,8 +6,9 @@
 // interpolation between LUT entries, front-to-back premultiplied compositing, early ray
 // termination at T < 1/255, empty-space skipping over 8³ blocks that keeps the sample grid,
 // and Blinn–Phong with a two-sided headlight from the gradient: the server's precomputed
-// central differences as a texture, trilinearly filtered, once the page has built it (until
-// then the central difference of the trilinear field at ±1 voxel, which equals it inside the box).
+// central differences as an 8-bit texture, trilinearly filtered, once the page has built it
+// (until then the central difference of the trilinear field at ±1 voxel, which equals it inside
+// the box, at six fetches a sample instead of one).
 
 export const VERTEX = `#version 300 es
 void main() {
@@ -45,8 +46,9 @@ const int BSIZE = 8;
 
 // textureLod, not texture: no implicit derivatives to work out (software rasterisers do).
 float value(vec3 p) {
-  vec3 c = clamp(p, vec3(0.0), u_dims - 1.0);
-  return textureLod(u_vol, (c + 0.5) * u_invDims, 0.0).r * u_map.x + u_map.y;
+  // No clamp to the box: the texture's CLAMP_TO_EDGE gives a point outside it the value at the
+  // edge, as the server's clamped index does.
+  return textureLod(u_vol, (p + 0.5) * u_invDims, 0.0).r * u_map.x + u_map.y;
 }
 
 vec4 lutAt(int q) {
@@ -102,12 +104,22 @@ ivec3 blockOf(vec3 p) {
 }
 `;
 
-export const RENDER = `#version 300 es
+/**
+ * The ray marcher's source for one kind of picture: `shading` (Blinn–Phong or emission only)
+ * and `gradient` (normals from the 8-bit gradient texture, or central differences of the
+ * volume texture). Each kind is its own program: a software rasteriser runs a branch on a
+ * uniform inside the loop at a real cost, a constant one not at all. `packed`: the gradient
+ * texture also holds the 8-bit value (alpha), so a shaded sample is one fetch in all.
+ */
+export function renderSource({ shading, gradient, packed = false }) {
+  return `#version 300 es
+#define SHADING ${shading ? 1 : 0}
+#define GRADIENT_TEXTURE ${gradient ? 1 : 0}
+#define PACKED_VALUE ${packed ? 1 : 0}
 ${COMMON}
 uniform vec4 u_shade;      // ambient, diffuse, specular, shininess
-uniform int u_shading;
-uniform sampler3D u_grad;  // RGB16F gradient (normalised units per voxel), linear filter
-uniform int u_gradTex;     // 1: shade from u_grad, 0: central differences of u_vol
+uniform sampler3D u_grad;  // RGBA8 gradient codes (128 = 0; alpha: the r8 value), linear filter
+uniform vec2 u_gcode;      // gradient = (texel - u_gcode.x) * u_gcode.y, normalised units per voxel
 uniform vec3 u_bg;
 uniform int u_alphaOut;    // 1: premultiplied RGBA (for compositing in the page), 0: over u_bg
 out vec4 outColor;
@@ -130,55 +142,61 @@ void main() {
   if (t.y >= t.x) {
     int n = int((t.y - t.x) / u_dt) + 1;
     int k = 0;
-    ivec3 cur = ivec3(-1);
-    bool seen = false;
-    while (k < n) {
-      float tt = t.x + float(k) * u_dt;
-      vec3 p = oi + tt * di;
-      ivec3 b = blockOf(p);
-      if (b != cur) {
-        cur = b;
-        seen = texelFetch(u_vis, b, 0).r > 0.5;
-      }
-      if (!seen) {
-        k = skipBlock(b, oi, di, t.x, k);
+    bool done = false;
+    while (k < n && !done) {
+      // Block by block: a skipped block costs one lookup, a visible one runs its samples
+      // with no bookkeeping per sample (a sample just past its exit lies in a neighbour's
+      // cells, whose value range then holds it: an invisible neighbour gives it alpha 0).
+      ivec3 b = blockOf(oi + (t.x + float(k) * u_dt) * di);
+      int kn = skipBlock(b, oi, di, t.x, k);
+      if (texelFetch(u_vis, b, 0).r < 0.5) {
+        k = kn;
         continue;
       }
-      vec4 e = lutLerp(value(p) * scale);
-      float a = e.a;
-      if (a > 0.0) {
-        vec3 c = e.rgb;
-        if (u_shading == 1) {
-          vec3 g;
-          if (u_gradTex == 1) {
-            vec3 pc = clamp(p, vec3(0.0), u_dims - 1.0);
-            g = textureLod(u_grad, (pc + 0.5) * u_invDims, 0.0).rgb * u_is;
-          } else {
-            g = 0.5 * vec3(
-              value(p + vec3(1.0, 0.0, 0.0)) - value(p - vec3(1.0, 0.0, 0.0)),
-              value(p + vec3(0.0, 1.0, 0.0)) - value(p - vec3(0.0, 1.0, 0.0)),
-              value(p + vec3(0.0, 0.0, 1.0)) - value(p - vec3(0.0, 0.0, 1.0))) * u_is;
+      for (int kend = min(kn, n); k < kend; k++) {
+        vec3 p = oi + (t.x + float(k) * u_dt) * di;
+#if PACKED_VALUE
+        vec4 vg = textureLod(u_grad, (p + 0.5) * u_invDims, 0.0);
+        vec4 e = lutLerp((vg.a * u_map.x + u_map.y) * scale);
+#else
+        vec4 e = lutLerp(value(p) * scale);
+#endif
+        float a = e.a;
+        if (a > 0.0) {
+          vec3 c = e.rgb;
+#if SHADING
+#if PACKED_VALUE
+          vec3 g = (vg.rgb - u_gcode.x) * u_gcode.y * u_is;
+#elif GRADIENT_TEXTURE
+          vec3 g = (textureLod(u_grad, (p + 0.5) * u_invDims, 0.0).rgb - u_gcode.x) * u_gcode.y * u_is;
+#else
+          vec3 g = 0.5 * vec3(
+            value(p + vec3(1.0, 0.0, 0.0)) - value(p - vec3(1.0, 0.0, 0.0)),
+            value(p + vec3(0.0, 1.0, 0.0)) - value(p - vec3(0.0, 1.0, 0.0)),
+            value(p + vec3(0.0, 0.0, 1.0)) - value(p - vec3(0.0, 0.0, 1.0))) * u_is;
+#endif
+          // |g| >= 1e-3 as the server's kernel, without branches (cheaper in software).
+          float m2 = dot(g, g);
+          float inv = inversesqrt(max(m2, 1e-12));
+          bool lit = m2 >= 1e-6;
+          float ndl = lit ? abs(dot(g, l)) * inv : 1.0;
+          float sp = lit ? exp2(u_shade.w * log2(max(abs(dot(g, h)) * inv, 1e-30))) : 0.0;
+          c = min(vec3(1.0), c * (u_shade.x + u_shade.y * ndl) + u_shade.z * sp);
+#endif
+          float w = tr * a;
+          acc += w * c;
+          tr *= 1.0 - a;
+          if (tr < u_tstop) {
+            done = true;
+            break;
           }
-          float m = length(g);
-          float ndl = 1.0;
-          float sp = 0.0;
-          if (m >= 1e-3) {
-            ndl = abs(dot(g, l)) / m;
-            sp = pow(abs(dot(g, h)) / m, u_shade.w);
-          }
-          float lit = u_shade.x + u_shade.y * ndl;
-          c = min(vec3(1.0), c * lit + u_shade.z * sp);
         }
-        float w = tr * a;
-        acc += w * c;
-        tr *= 1.0 - a;
-        if (tr < u_tstop) break;
       }
-      k += 1;
     }
   }
   outColor = u_alphaOut == 1 ? vec4(acc, 1.0 - tr) : vec4(acc + tr * u_bg, 1.0);
 }`;
+}
 
 /**
  * Per-feature attribution (kernels.attribute over the sample cache's nearest-entry samples):
@@ -209,35 +227,37 @@ ${g.map((i) => `  vec4 part${i} = vec4(0.0);`).join("\n")}
   if (t.y >= t.x) {
     int n = int((t.y - t.x) / u_dt) + 1;
     int k = 0;
-    ivec3 cur = ivec3(-1);
-    bool seen = false;
-    while (k < n) {
-      float tt = t.x + float(k) * u_dt;
-      vec3 p = oi + tt * di;
-      ivec3 b = blockOf(p);
-      if (b != cur) {
-        cur = b;
-        seen = texelFetch(u_vis, b, 0).r > 0.5;
-      }
-      if (!seen) {
-        k = skipBlock(b, oi, di, t.x, k);
+    bool done = false;
+    while (k < n && !done) {
+      // Block by block: a skipped block costs one lookup, a visible one runs its samples
+      // with no bookkeeping per sample (a sample just past its exit lies in a neighbour's
+      // cells, whose value range then holds it: an invisible neighbour gives it alpha 0).
+      ivec3 b = blockOf(oi + (t.x + float(k) * u_dt) * di);
+      int kn = skipBlock(b, oi, di, t.x, k);
+      if (texelFetch(u_vis, b, 0).r < 0.5) {
+        k = kn;
         continue;
       }
-      int q = clamp(int(value(p) * scale + 0.5), 0, u_nl - 1);
-      float a = lutAt(q).a;
-      if (a > 0.0) {
-        float s = float(q) / scale;
-${g.map((i) => `        vec4 z${i} = (vec4(s) - u_mean[${i}]) / u_width[${i}];
-        vec4 c${i} = u_height[${i}] * exp(-0.5 * z${i} * z${i});`).join("\n")}
-        float total = ${g.map((i) => `dot(c${i}, vec4(1.0))`).join(" + ")};
-        if (total > 0.0) {
-          float w = tr * a / total;
-${g.map((i) => `          part${i} += w * c${i};`).join("\n")}
+      for (int kend = min(kn, n); k < kend; k++) {
+        vec3 p = oi + (t.x + float(k) * u_dt) * di;
+        int q = clamp(int(value(p) * scale + 0.5), 0, u_nl - 1);
+        float a = lutAt(q).a;
+        if (a > 0.0) {
+          float s = float(q) / scale;
+${g.map((i) => `          vec4 z${i} = (vec4(s) - u_mean[${i}]) / u_width[${i}];
+          vec4 c${i} = u_height[${i}] * exp(-0.5 * z${i} * z${i});`).join("\n")}
+          float total = ${g.map((i) => `dot(c${i}, vec4(1.0))`).join(" + ")};
+          if (total > 0.0) {
+            float w = tr * a / total;
+${g.map((i) => `            part${i} += w * c${i};`).join("\n")}
+          }
+          tr *= 1.0 - a;
+          if (tr < u_tstop) {
+            done = true;
+            break;
+          }
         }
-        tr *= 1.0 - a;
-        if (tr < u_tstop) break;
       }
-      k += 1;
     }
   }
 ${g.map((i) => `  out${i} = part${i};`).join("\n")}

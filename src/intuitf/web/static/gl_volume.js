@@ -182,81 +182,99 @@ export function visibleBlocks(blocks, occ, out) {
   return vis;
 }
 
-const f32 = new Float32Array(1);
-const u32 = new Uint32Array(f32.buffer);
-
-/** The IEEE half-float bits of `v` (rounded to nearest, ties to even). */
-export function toHalf(v) {
-  f32[0] = v;
-  const x = u32[0];
-  const sign = (x >>> 16) & 0x8000;
-  const e = (x >>> 23) & 0xff;
-  let m = x & 0x7fffff;
-  if (e === 255) return sign | 0x7c00 | (m ? 0x200 : 0);
-  const he = e - 112; // e - 127 + 15
-  if (he >= 31) return sign | 0x7c00;
-  if (he <= 0) {
-    if (he < -10) return sign;
-    m |= 0x800000;
-    const shift = 14 - he;
-    let hm = m >> shift;
-    const rem = m & ((1 << shift) - 1);
-    const halfway = 1 << (shift - 1);
-    if (rem > halfway || (rem === halfway && hm & 1)) hm++;
-    return sign | hm;
+/**
+ * The volume's central differences (one-sided at the borders, as the server's
+ * kernels.central_gradient) along x, y and z for the voxels of row (y, z), in texel units
+ * (bytes for r8, normalised values for r16f), into the row arrays gx, gy, gz.
+ */
+function rowDifferences(vol, half, y, z, gx, gy, gz) {
+  const [nx, ny, nz] = vol.dims;
+  const d = vol.data;
+  const sy = nx;
+  const sz = nx * ny;
+  const base = (z * ny + y) * nx;
+  // The neighbours' rows and the factor (0.5 inside, 1 at a border) along y and z.
+  const yLo = y > 0 ? base - sy : base;
+  const yHi = y < ny - 1 ? base + sy : base;
+  const fy = ny < 2 ? 0 : y > 0 && y < ny - 1 ? 0.5 : 1;
+  const zLo = z > 0 ? base - sz : base;
+  const zHi = z < nz - 1 ? base + sz : base;
+  const fz = nz < 2 ? 0 : z > 0 && z < nz - 1 ? 0.5 : 1;
+  if (half) {
+    for (let x = 0; x < nx; x++) {
+      const xl = x > 0 ? x - 1 : x;
+      const xh = x < nx - 1 ? x + 1 : x;
+      const fx = nx < 2 ? 0 : x > 0 && x < nx - 1 ? 0.5 : 1;
+      gx[x] = fx * (half[d[base + xh]] - half[d[base + xl]]);
+      gy[x] = fy * (half[d[yHi + x]] - half[d[yLo + x]]);
+      gz[x] = fz * (half[d[zHi + x]] - half[d[zLo + x]]);
+    }
+  } else {
+    for (let x = 0; x < nx; x++) {
+      const xl = x > 0 ? x - 1 : x;
+      const xh = x < nx - 1 ? x + 1 : x;
+      const fx = nx < 2 ? 0 : x > 0 && x < nx - 1 ? 0.5 : 1;
+      gx[x] = fx * (d[base + xh] - d[base + xl]);
+      gy[x] = fy * (d[yHi + x] - d[yLo + x]);
+      gz[x] = fz * (d[zHi + x] - d[zLo + x]);
+    }
   }
-  const hm = m >> 13;
-  const rem = m & 0x1fff;
-  let out = sign | (he << 10) | hm;
-  if (rem > 0x1000 || (rem === 0x1000 && hm & 1)) out++; // a carry into the exponent is right
-  return out;
 }
 
 /**
- * The gradient of slices [z0, z1) in normalised value units per voxel, as half floats (RGB, x
- * fastest) into `out`: central differences, one-sided at the borders, as the server's
- * kernels.central_gradient. Trilinear filtering of it is the server's interpolated gradient.
+ * How the page stores the volume's gradient in 8 bits: the largest difference (texel units)
+ * over the volume sets the step, so that codes 1..255 (128 = 0) span it. Works a slab at a
+ * time, yielding to the page. Returns {step, toNormalised} (a code's unit in texel units, and
+ * texel units → normalised values), or null when the volume is changed meanwhile (`alive()`).
  */
-export function gradientSlab(vol, z0, z1, out) {
+export async function gradientCoding(vol, alive = () => true) {
   const [nx, ny, nz] = vol.dims;
-  const data = vol.data;
-  const sxy = nx * ny;
-  if (vol.format === "r8") {
-    // Byte differences take 1021 values: their half floats come from a table.
-    const scale = vol.map[0] / 255;
-    const table = new Uint16Array(1021);
-    for (let k = -510; k <= 510; k++) table[k + 510] = toHalf(0.5 * k * scale);
-    // twice the gradient in bytes: a - b between neighbours (central), 2 (a - b) at a border.
-    const twice = (i, stride, c, n) =>
-      n < 2 ? 0 : c === 0 ? 2 * (data[i + stride] - data[i]) : c === n - 1 ? 2 * (data[i] - data[i - stride]) : data[i + stride] - data[i - stride];
-    let o = 0;
-    for (let z = z0; z < z1; z++) {
-      for (let y = 0; y < ny; y++) {
-        const base = z * sxy + y * nx;
-        for (let x = 0; x < nx; x++) {
-          const i = base + x;
-          out[o++] = table[twice(i, 1, x, nx) + 510];
-          out[o++] = table[twice(i, nx, y, ny) + 510];
-          out[o++] = table[twice(i, sxy, z, nz) + 510];
-        }
+  const half = vol.format === "r8" ? null : halfToFloat();
+  const [gx, gy, gz] = [new Float32Array(nx), new Float32Array(nx), new Float32Array(nx)];
+  let top = 0;
+  let lastYield = performance.now();
+  for (let z = 0; z < nz; z++) {
+    for (let y = 0; y < ny; y++) {
+      rowDifferences(vol, half, y, z, gx, gy, gz);
+      for (let x = 0; x < nx; x++) {
+        const m = Math.max(Math.abs(gx[x]), Math.abs(gy[x]), Math.abs(gz[x]));
+        if (m > top) top = m;
       }
     }
-    return out;
+    if (performance.now() - lastYield > 30) {
+      await nextTick();
+      if (!alive()) return null;
+      lastYield = performance.now();
+    }
   }
-  const half = halfToFloat();
-  const scale = vol.map[0];
-  const v = (i) => half[data[i]];
-  const grad = (i, stride, c, n) =>
-    n < 2 ? 0 : c === 0 ? v(i + stride) - v(i) : c === n - 1 ? v(i) - v(i - stride) : 0.5 * (v(i + stride) - v(i - stride));
+  return { step: top > 0 ? top / 127 : 1, toNormalised: vol.format === "r8" ? vol.map[0] / 255 : vol.map[0] };
+}
+
+/**
+ * Gradient codes of slices [z0, z1) as RGBA8 (x fastest; alpha: the byte value of an r8
+ * volume, so that one fetch gives a shaded sample all it needs) into `out`:
+ * round(difference / step) + 128. Trilinear filtering of it is the server's interpolated
+ * gradient to within half a step.
+ */
+export function gradientSlab(vol, z0, z1, coding, out) {
+  const [nx, ny] = vol.dims;
+  const half = vol.format === "r8" ? null : halfToFloat();
+  const [gx, gy, gz] = [new Float32Array(nx), new Float32Array(nx), new Float32Array(nx)];
+  const k = 1 / coding.step;
+  const r8 = vol.format === "r8" ? vol.data : null;
+  const code = (v) => {
+    const c = (v < 0 ? -Math.round(-v * k) : Math.round(v * k)) + 128; // symmetric about 0
+    return c < 1 ? 1 : c > 255 ? 255 : c;
+  };
   let o = 0;
   for (let z = z0; z < z1; z++) {
     for (let y = 0; y < ny; y++) {
-      const base = z * sxy + y * nx;
+      rowDifferences(vol, half, y, z, gx, gy, gz);
       for (let x = 0; x < nx; x++) {
-        const i = base + x;
-        out[o++] = toHalf(grad(i, 1, x, nx) * scale);
-        out[o++] = toHalf(grad(i, nx, y, ny) * scale);
-        out[o++] = toHalf(grad(i, sxy, z, nz) * scale);
+        out[o++] = code(gx[x]);
+        out[o++] = code(gy[x]);
+        out[o++] = code(gz[x]);
+        out[o++] = r8 ? r8[(z * ny + y) * nx + x] : 255;
       }
     }
   }
