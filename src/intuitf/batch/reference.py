@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from intuitf.errors import IntuitfError
+from intuitf.session.rundir import RunDirectory
 from intuitf.tf import GaussianTF
 
 PICTURE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".gif", ".webp", ".tif", ".tiff")
@@ -145,12 +146,11 @@ def _render(tf: GaussianTF, volume_source: str, reader: dict, size: int, camera:
 
 def _from_run(run: Path, notes: list[str]) -> Reference:
     from intuitf.imageio import load_image
-    from intuitf.session import RunDirectory
     from intuitf.tf import load_tf
 
     rd = RunDirectory(run)
     record = rd.read_run()
-    tf_path, pic_path = run / "best" / "rank01.tf.json", run / "best" / "rank01.png"
+    tf_path, pic_path = rd.best_file(1, ".tf.json"), rd.best_file(1, ".png")
     if not tf_path.exists() or not pic_path.exists():
         raise IntuitfError(
             f"{run} has no best result yet (best/rank01.tf.json and best/rank01.png).",
@@ -201,7 +201,7 @@ def load_reference(
             "Give a picture, a TF JSON, or a finished run folder as REFERENCE.",
         )
     if p.is_dir():
-        if not (p / "run.json").exists():
+        if not RunDirectory(p).exists():
             raise IntuitfError(
                 f"{p} is a folder but not a run folder (no run.json).",
                 "Give a picture, a TF JSON, or a folder written by intuitf optimize.",
@@ -214,9 +214,8 @@ def load_reference(
         beside = p.with_name(stem + ".png")
         if (
             reference_volume is None
-            and p.parent.name == "best"
-            and (run / "run.json").exists()
-            and stem == "rank01"
+            and RunDirectory(run).exists()
+            and p.with_name(stem + ".tf.json") == RunDirectory(run).best_file(1, ".tf.json")
         ):
             return _from_run(run, notes)
         counts = value_range = name = None

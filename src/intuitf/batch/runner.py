@@ -48,6 +48,7 @@ from typing import Any
 from intuitf.batch.lease import DriverLease, LeasedJudge, LeaseWatch, start_reaper
 from intuitf.batch.plan import VolumeItem
 from intuitf.errors import IntuitfError, RenderError, TransferFunctionError, VolumeError
+from intuitf.session.rundir import RunDirectory
 
 log = logging.getLogger(__name__)
 
@@ -117,7 +118,7 @@ def is_finished(root: str | Path, key: str) -> bool:
     return bool(
         res
         and res.get("status") == FINISHED
-        and (runs_dir(root) / key / "best" / "rank01.png").exists()
+        and RunDirectory(runs_dir(root) / key).best_file(1, ".png").exists()
     )
 
 
@@ -312,7 +313,7 @@ class WorkerCore:
                     "message": "The batch's budget was spent before this volume's turn."}  # fmt: skip
         result["attempts"] += 1
         t_open = time.perf_counter()
-        if (rd / "run.json").exists():
+        if RunDirectory(rd).exists():
             session = await asyncio.to_thread(Session.resume, rd)
         else:
             session, start_sim = await asyncio.to_thread(self._open, item, rd)

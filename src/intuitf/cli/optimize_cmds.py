@@ -477,7 +477,9 @@ def _where(session) -> str:
 
 def _lost_requests(outcome) -> tuple[int, float]:
     """Requests a killed process recorded but never saw answered, and their estimated price."""
-    store = outcome.run_dir / "verdicts.sqlite" if outcome.run_dir is not None else None
+    from intuitf.session.rundir import RunDirectory
+
+    store = RunDirectory(outcome.run_dir).verdicts if outcome.run_dir is not None else None
     if store is None or not store.exists():
         return 0, 0.0
     from intuitf.evaluator.cache import VerdictCache

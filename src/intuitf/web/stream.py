@@ -16,6 +16,7 @@ import json
 from collections.abc import AsyncIterator
 
 from intuitf.session.events import RunEvent, read_events
+from intuitf.session.rundir import RunDirectory
 
 _CLOSED = object()
 
@@ -28,7 +29,7 @@ def format_event(e: RunEvent) -> str:
 async def run_events(web, name: str, since: int, keepalive: float) -> AsyncIterator[str]:
     """The SSE text of run ``name``'s events after ``since``, then of every new one."""
     registry = web.registry
-    path = web.store.path_of(name) / "events.jsonl"
+    path = RunDirectory(web.store.path_of(name)).events
     last = max(0, int(since))
     yield f"retry: 2000\n: events of {name} after {last}\n\n"
     while not web.stopping:
