@@ -31,51 +31,18 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 from intuitf.evaluator.mllm import MLLMJudge
 from intuitf.evaluator.types import Intent
 from intuitf.intent.aspects import aspects_for
-from intuitf.testing import images
+from intuitf.testing import images, personalities
 from intuitf.testing.fake_mllm import FakeMLLMServer, Personality
-
-SPECS = {
-    "openai-reasoning": ["--evaluator", "openai:gpt-5.4-mini"],
-    "openai-reasoning-by-url": ["--evaluator", "URL#gpt-5.4-mini"],
-    "gemini-thinking": ["--evaluator", "gemini:gemini-2.5-flash"],
-    # Thoughts (2000 tokens at medium effort) spend a 1024-token budget: asked again with more.
-    "gemini-thinking-small-budget": [
-        "--evaluator",
-        "gemini:gemini-2.5-flash",
-        "--max-output-tokens",
-        "1024",
-        "--reasoning-effort",
-        "medium",
-    ],  # fmt: skip
-    "ollama": ["--evaluator", "ollama"],
-    "lmstudio": ["--evaluator", "lmstudio"],
-    "vllm-one-image": ["--evaluator", "vllm"],
-}
-
-
-def _served(personality: str) -> str:
-    """The fake server's personality behind a variant of how it is reached."""
-    return personality.removesuffix("-by-url").removesuffix("-small-budget")
-
-
-def _target() -> np.ndarray:
-    y, x = np.mgrid[0:64, 0:64]
-    img = np.zeros((64, 64, 3), np.uint8)
-    img[(x - 32) ** 2 + (y - 32) ** 2 < 18**2] = (200, 60, 40)
-    return img
+from intuitf.testing.images import red_disc
 
 
 def short_run(personality: str, folder: Path) -> dict:
     """One short optimize against ``personality``: the figures of the issue's note."""
-    with FakeMLLMServer(target=_target(), personality=_served(personality)) as srv:
-        spec = [s.replace("URL", srv.base_url) for s in SPECS[personality]]
-        if not any("URL" in s for s in SPECS[personality]):
-            spec += ["--base-url", srv.base_url]
+    with FakeMLLMServer(target=red_disc(), personality=personalities.served(personality)) as srv:
+        spec = personalities.optimize_flags(personality, srv.base_url)
         env = dict(os.environ, OPENAI_API_KEY="sk-fake", GEMINI_API_KEY="fake")
         run = folder / personality
         t0 = time.perf_counter()
@@ -149,7 +116,7 @@ def main() -> None:
     if args.part in ("runs", "both"):
         print("Short optimize runs (population 8, 2 generations):")
         with tempfile.TemporaryDirectory() as tmp:
-            for name in SPECS:
+            for name in personalities.SPECS:
                 print("  " + json.dumps(short_run(name, Path(tmp))), flush=True)
     if args.part in ("slow", "both"):
         print(

@@ -13,10 +13,10 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from intuitf.testing.fake_mllm import FakeMLLMServer
+from intuitf.testing.images import red_disc
 
 COMMON = ["--population", "16", "--generations", "4", "--size", "48", "--output-size", "48",
           "--top", "1", "--seed", "3", "--text", "red bone, faint blue skin"]  # fmt: skip
@@ -37,13 +37,6 @@ def _intuitf(*args, check=True, timeout=300):
     return proc
 
 
-def _target() -> np.ndarray:
-    y, x = np.mgrid[0:64, 0:64]
-    img = np.zeros((64, 64, 3), np.uint8)
-    img[(x - 32) ** 2 + (y - 32) ** 2 < 18**2] = (200, 60, 40)
-    return img
-
-
 def _paid(out: str) -> int:
     """The paid-call count of the end summary."""
     m = re.search(r"(\d+) paid call", out)
@@ -54,7 +47,7 @@ def _paid(out: str) -> int:
 @pytest.mark.slow
 def test_a_resume_with_a_larger_budget_pays_exactly_the_difference(tmp_path):
     run = tmp_path / "run"
-    with FakeMLLMServer(target=_target()) as srv:
+    with FakeMLLMServer(target=red_disc()) as srv:
         spec = ["--evaluator", srv.base_url]
         first = _intuitf("optimize", "phantom", *COMMON, *spec, "--budget-calls", "60",
                          "-o", str(run), check=False)  # fmt: skip
@@ -73,7 +66,7 @@ def test_a_resume_with_a_larger_budget_pays_exactly_the_difference(tmp_path):
 def test_budget_stop_resume_kill_and_resume_never_pay_beyond_the_budget(tmp_path):
     run = tmp_path / "run"
     budget = 150
-    with FakeMLLMServer(target=_target(), latency=0.05) as srv:
+    with FakeMLLMServer(target=red_disc(), latency=0.05) as srv:
         spec = ["--evaluator", srv.base_url]
         first = _intuitf("optimize", "phantom", *COMMON, *spec, "--budget-calls", "50",
                          "-o", str(run), check=False)  # fmt: skip
@@ -127,7 +120,7 @@ def test_a_negative_budget_is_refused(tmp_path):
 
 def test_a_hanging_server_fails_fast_with_short_timeouts_and_says_how_to_resume(tmp_path):
     run = tmp_path / "run"
-    with FakeMLLMServer(target=_target(), faults={"hang": 1.0}, hang_seconds=120) as srv:
+    with FakeMLLMServer(target=red_disc(), faults={"hang": 1.0}, hang_seconds=120) as srv:
         t0 = time.perf_counter()
         proc = _intuitf("optimize", "phantom", *COMMON, "--evaluator", srv.base_url,
                         "--request-timeout", "0.5", "--answer-deadline", "1.5", "-o", str(run),
@@ -144,7 +137,7 @@ def test_a_hanging_server_fails_fast_with_short_timeouts_and_says_how_to_resume(
 @pytest.mark.slow
 def test_resume_with_a_new_base_url_moves_the_run_and_records_it(tmp_path):
     run = tmp_path / "run"
-    with FakeMLLMServer(target=_target()) as old, FakeMLLMServer(target=_target()) as new:
+    with FakeMLLMServer(target=red_disc()) as old, FakeMLLMServer(target=red_disc()) as new:
         first = _intuitf("optimize", "phantom", *COMMON, "--evaluator", old.base_url + "#m1",
                          "--budget-calls", "60", "-o", str(run), check=False)  # fmt: skip
         assert first.returncode == 3
@@ -165,7 +158,7 @@ def test_resume_with_a_new_base_url_moves_the_run_and_records_it(tmp_path):
 @pytest.mark.slow
 def test_credentials_in_a_url_are_never_stored_or_shown(tmp_path):
     run = tmp_path / "run"
-    with FakeMLLMServer(target=_target()) as srv:
+    with FakeMLLMServer(target=red_disc()) as srv:
         url = srv.base_url.replace("http://", "http://me:SECRETKEY123@")
         first = _intuitf("optimize", "phantom", *COMMON, "--evaluator", url, "--budget-calls",
                          "20", "-o", str(run), check=False)  # fmt: skip
@@ -188,7 +181,7 @@ def test_credentials_in_a_url_are_never_stored_or_shown(tmp_path):
 def test_run_folder_of_a_budget_stop_is_resumable_by_path_only(tmp_path):
     """The smallest budget case: zero calls allowed is a clean stop, not an error."""
     run = tmp_path / "run"
-    with FakeMLLMServer(target=_target()) as srv:
+    with FakeMLLMServer(target=red_disc()) as srv:
         proc = _intuitf("optimize", "phantom", *COMMON, "--evaluator", srv.base_url,
                         "--budget-calls", "0", "-o", str(run), check=False)  # fmt: skip
         assert proc.returncode == 3 and srv.stats.requests == 0
@@ -198,7 +191,7 @@ def test_run_folder_of_a_budget_stop_is_resumable_by_path_only(tmp_path):
 @pytest.mark.slow
 def test_an_overwritten_run_counts_only_its_own_spend(tmp_path):
     run = tmp_path / "run"
-    with FakeMLLMServer(target=_target()) as srv:
+    with FakeMLLMServer(target=red_disc()) as srv:
         spec = ["--evaluator", srv.base_url]
         _intuitf("optimize", "phantom", *COMMON, *spec, "--budget-calls", "30", "-o", str(run),
                  check=False)  # fmt: skip

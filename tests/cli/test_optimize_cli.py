@@ -10,11 +10,11 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from helpers.waiting import wait_for
 from intuitf.testing.fake_mllm import FakeMLLMServer
+from intuitf.testing.images import red_disc
 
 COMMON = [
     "--population",
@@ -65,14 +65,6 @@ def _generations(run: Path) -> list[int]:
     return out
 
 
-def _target() -> np.ndarray:
-    y, x = np.mgrid[0:64, 0:64]
-    img = np.zeros((64, 64, 3), np.uint8)
-    disc = (x - 32) ** 2 + (y - 32) ** 2 < 18**2
-    img[disc] = (200, 60, 40)
-    return img
-
-
 def test_optimize_with_metric_judge_writes_a_run(tmp_path):
     run = tmp_path / "run"
     proc = _intuitf("optimize", "phantom", *COMMON, "-o", str(run))
@@ -101,7 +93,7 @@ def test_bad_volume_is_one_clear_message(tmp_path):
 
 @pytest.mark.slow
 def test_killed_run_resumes_with_nothing_repeated(tmp_path):
-    with FakeMLLMServer(target=_target(), latency=0.01) as srv:
+    with FakeMLLMServer(target=red_disc(), latency=0.01) as srv:
         spec = ["--evaluator", srv.base_url]
         ref = tmp_path / "ref"
         _intuitf("optimize", "phantom", *COMMON, *spec, "-o", str(ref))
@@ -147,7 +139,7 @@ def test_killed_run_resumes_with_nothing_repeated(tmp_path):
 
 
 def test_ctrl_c_saves_and_says_how_to_resume(tmp_path):
-    with FakeMLLMServer(target=_target(), latency=0.05) as srv:
+    with FakeMLLMServer(target=red_disc(), latency=0.05) as srv:
         run = tmp_path / "run"
         proc = subprocess.Popen(
             [
@@ -179,7 +171,7 @@ def test_ctrl_c_saves_and_says_how_to_resume(tmp_path):
 
 
 def test_lost_model_server_ends_cleanly(tmp_path):
-    with FakeMLLMServer(target=_target()) as srv:
+    with FakeMLLMServer(target=red_disc()) as srv:
         url = srv.base_url
     # The server is gone now: nothing listens on that port any more.
     run = tmp_path / "run"
@@ -191,7 +183,7 @@ def test_lost_model_server_ends_cleanly(tmp_path):
 
 
 def test_spent_budget_stops_cleanly_and_a_larger_one_resumes(tmp_path):
-    with FakeMLLMServer(target=_target()) as srv:
+    with FakeMLLMServer(target=red_disc()) as srv:
         run = tmp_path / "run"
         spec = ["--evaluator", srv.base_url]
         first = _intuitf("optimize", "phantom", *COMMON, *spec, "--budget-calls", "30",

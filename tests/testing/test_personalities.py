@@ -17,43 +17,13 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 
+from intuitf.testing import personalities
 from intuitf.testing.fake_mllm import FakeMLLMServer
+from intuitf.testing.images import red_disc
 
 FIXTURES = Path(__file__).parent.parent / "data" / "judge_requests"
-
-#: How each personality is reached: the preset a user would name (with the fake's address).
-SPECS = {
-    "openai-reasoning": ["--evaluator", "openai:gpt-5.4-mini"],
-    "openai-reasoning-by-url": ["--evaluator", "URL#gpt-5.4-mini"],
-    "gemini-thinking": ["--evaluator", "gemini:gemini-2.5-flash"],
-    # Thoughts (2000 tokens at medium effort) spend a 1024-token budget: asked again with more.
-    "gemini-thinking-small-budget": [
-        "--evaluator",
-        "gemini:gemini-2.5-flash",
-        "--max-output-tokens",
-        "1024",
-        "--reasoning-effort",
-        "medium",
-    ],  # fmt: skip
-    "ollama": ["--evaluator", "ollama"],
-    "lmstudio": ["--evaluator", "lmstudio"],
-    "vllm-one-image": ["--evaluator", "vllm"],
-}
-
-
-def _served(personality: str) -> str:
-    """The fake server's personality behind a variant of how it is reached."""
-    return personality.removesuffix("-by-url").removesuffix("-small-budget")
-
-
-def _target() -> np.ndarray:
-    y, x = np.mgrid[0:64, 0:64]
-    img = np.zeros((64, 64, 3), np.uint8)
-    img[(x - 32) ** 2 + (y - 32) ** 2 < 18**2] = (200, 60, 40)
-    return img
 
 
 def _shape(body: dict) -> dict:
@@ -79,11 +49,9 @@ def _shape(body: dict) -> dict:
 def _run(
     personality: str, run: Path, *extra: str
 ) -> tuple[subprocess.CompletedProcess, FakeMLLMServer, float]:
-    served = _served(personality)
-    with FakeMLLMServer(target=_target(), personality=served) as srv:
-        spec = [s.replace("URL", srv.base_url) for s in SPECS[personality]]
-        if not any("URL" in s for s in SPECS[personality]):
-            spec += ["--base-url", srv.base_url]
+    served = personalities.served(personality)
+    with FakeMLLMServer(target=red_disc(), personality=served) as srv:
+        spec = personalities.optimize_flags(personality, srv.base_url)
         env = dict(
             os.environ, OPENAI_API_KEY="sk-fake", GEMINI_API_KEY="fake", PYTHONUNBUFFERED="1"
         )
@@ -111,7 +79,7 @@ def _matches(run: Path) -> tuple[int, int, int]:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("personality", list(SPECS))
+@pytest.mark.parametrize("personality", list(personalities.SPECS))
 def test_short_optimize_completes_against_each_personality(personality, tmp_path):
     run = tmp_path / "run"
     proc, srv, wall = _run(personality, run)

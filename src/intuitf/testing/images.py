@@ -21,3 +21,11 @@ def oracle_images(seed: int = 7, size: int = 48) -> tuple[np.ndarray, list[np.nd
         img = (1 - t) * target + t * inverted
         candidates.append(np.clip(img + 0.5, 0, 255).astype(np.uint8))
     return target, candidates
+
+
+def red_disc(size: int = 64) -> np.ndarray:
+    """A red disc on black (radius 18 of 64): the fake model server's usual target picture."""
+    y, x = np.mgrid[0:size, 0:size] * (64.0 / size)
+    img = np.zeros((size, size, 3), np.uint8)
+    img[(x - 32) ** 2 + (y - 32) ** 2 < 18**2] = (200, 60, 40)
+    return img
