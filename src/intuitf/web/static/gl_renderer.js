@@ -64,6 +64,13 @@ function program(gl, vs, fs) {
   return { p, u: uniforms };
 }
 
+/** Trilinear filtering and the edge value outside: the bound 3-D texture as the server samples. */
+function linearClampedTexture3D(gl) {
+  gl.texParameteri(gl.TEXTURE_3D, gl.TEXTURE_MIN_FILTER, gl.LINEAR);
+  gl.texParameteri(gl.TEXTURE_3D, gl.TEXTURE_MAG_FILTER, gl.LINEAR);
+  for (const w of [gl.TEXTURE_WRAP_S, gl.TEXTURE_WRAP_T, gl.TEXTURE_WRAP_R]) gl.texParameteri(gl.TEXTURE_3D, w, gl.CLAMP_TO_EDGE);
+}
+
 export class GLVolumeRenderer {
   /** A renderer on `canvas` (a fresh one when omitted). Throws when WebGL2 is missing. */
   constructor(canvas = document.createElement("canvas")) {
@@ -137,14 +144,7 @@ export class GLVolumeRenderer {
       gl.texSubImage3D(gl.TEXTURE_3D, 0, 0, 0, z, nx, ny, d, gl.RED, r8 ? gl.UNSIGNED_BYTE : gl.HALF_FLOAT, part);
       if (z + d < nz) await new Promise((r) => setTimeout(r, 0));
     }
-    for (const [k, v] of [
-      [gl.TEXTURE_MIN_FILTER, gl.LINEAR],
-      [gl.TEXTURE_MAG_FILTER, gl.LINEAR],
-      [gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE],
-      [gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE],
-      [gl.TEXTURE_WRAP_R, gl.CLAMP_TO_EDGE],
-    ])
-      gl.texParameteri(gl.TEXTURE_3D, k, v);
+    linearClampedTexture3D(gl);
     this.volTex = tex;
     // The block grid: one byte per block, rewritten for each TF (storage is immutable: a
     // new texture per volume).
@@ -208,14 +208,7 @@ export class GLVolumeRenderer {
       gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
       gl.texSubImage3D(gl.TEXTURE_3D, 0, 0, 0, z, nx, ny, d, gl.RGBA, gl.UNSIGNED_BYTE, part);
     }
-    for (const [k, v] of [
-      [gl.TEXTURE_MIN_FILTER, gl.LINEAR],
-      [gl.TEXTURE_MAG_FILTER, gl.LINEAR],
-      [gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE],
-      [gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE],
-      [gl.TEXTURE_WRAP_R, gl.CLAMP_TO_EDGE],
-    ])
-      gl.texParameteri(gl.TEXTURE_3D, k, v);
+    linearClampedTexture3D(gl);
     if (this.volume !== vol) {
       gl.deleteTexture(tex);
       return false;

@@ -10,6 +10,29 @@
 // (until then the central difference of the trilinear field at ±1 voxel, which equals it inside
 // the box, at six fetches a sample instead of one).
 
+/**
+ * The head of both ray loops, inside main() once the ray (oi, di) and its box span t are
+ * known: it opens the loops over the visible samples, p being the sample's position; the
+ * body ends a ray with "done = true; break;" and closes the two loops and the if.
+ */
+const MARCH = `  if (t.y >= t.x) {
+    int n = int((t.y - t.x) / u_dt) + 1;
+    int k = 0;
+    bool done = false;
+    while (k < n && !done) {
+      // Block by block: a skipped block costs one lookup, a visible one runs its samples
+      // with no bookkeeping per sample (a sample just past its exit lies in a neighbour's
+      // cells, whose value range then holds it: an invisible neighbour gives it alpha 0).
+      ivec3 b = blockOf(oi + (t.x + float(k) * u_dt) * di);
+      int kn = skipBlock(b, oi, di, t.x, k);
+      if (texelFetch(u_vis, b, 0).r < 0.5) {
+        k = kn;
+        continue;
+      }
+      for (int kend = min(kn, n); k < kend; k++) {
+        vec3 p = oi + (t.x + float(k) * u_dt) * di;
+`;
+
 export const VERTEX = `#version 300 es
 void main() {
   // One triangle that covers the viewport.
@@ -139,23 +162,7 @@ void main() {
   vec3 acc = vec3(0.0);
   float tr = 1.0;
   float scale = float(u_nl - 1);
-  if (t.y >= t.x) {
-    int n = int((t.y - t.x) / u_dt) + 1;
-    int k = 0;
-    bool done = false;
-    while (k < n && !done) {
-      // Block by block: a skipped block costs one lookup, a visible one runs its samples
-      // with no bookkeeping per sample (a sample just past its exit lies in a neighbour's
-      // cells, whose value range then holds it: an invisible neighbour gives it alpha 0).
-      ivec3 b = blockOf(oi + (t.x + float(k) * u_dt) * di);
-      int kn = skipBlock(b, oi, di, t.x, k);
-      if (texelFetch(u_vis, b, 0).r < 0.5) {
-        k = kn;
-        continue;
-      }
-      for (int kend = min(kn, n); k < kend; k++) {
-        vec3 p = oi + (t.x + float(k) * u_dt) * di;
-#if PACKED_VALUE
+${MARCH}#if PACKED_VALUE
         vec4 vg = textureLod(u_grad, (p + 0.5) * u_invDims, 0.0);
         vec4 e = lutLerp((vg.a * u_map.x + u_map.y) * scale);
 #else
@@ -224,23 +231,7 @@ void main() {
 ${g.map((i) => `  vec4 part${i} = vec4(0.0);`).join("\n")}
   float tr = 1.0;
   float scale = float(u_nl - 1);
-  if (t.y >= t.x) {
-    int n = int((t.y - t.x) / u_dt) + 1;
-    int k = 0;
-    bool done = false;
-    while (k < n && !done) {
-      // Block by block: a skipped block costs one lookup, a visible one runs its samples
-      // with no bookkeeping per sample (a sample just past its exit lies in a neighbour's
-      // cells, whose value range then holds it: an invisible neighbour gives it alpha 0).
-      ivec3 b = blockOf(oi + (t.x + float(k) * u_dt) * di);
-      int kn = skipBlock(b, oi, di, t.x, k);
-      if (texelFetch(u_vis, b, 0).r < 0.5) {
-        k = kn;
-        continue;
-      }
-      for (int kend = min(kn, n); k < kend; k++) {
-        vec3 p = oi + (t.x + float(k) * u_dt) * di;
-        int q = clamp(int(value(p) * scale + 0.5), 0, u_nl - 1);
+${MARCH}        int q = clamp(int(value(p) * scale + 0.5), 0, u_nl - 1);
         float a = lutAt(q).a;
         if (a > 0.0) {
           float s = float(q) / scale;
