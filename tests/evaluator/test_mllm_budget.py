@@ -102,3 +102,38 @@ def test_money_budget(oracle_images):
             asyncio.run(judge.compare(c[3], c[4], Q, Intent()))
     assert budget.calls == 2 and budget.usd <= budget.max_usd
     assert srv.stats.requests == 3
+
+
+def test_a_send_gate_stops_queued_requests_unsent_and_frees_their_budget(oracle_images):
+    """A batch worker whose driver died: comparisons already waiting for a turn are not sent."""
+    from intuitf.errors import RunCancelled
+
+    target, c = oracle_images
+    budget = Budget(max_calls=100)
+    gone = {"now": False}
+
+    def gate() -> None:
+        if gone["now"]:
+            raise RunCancelled("the driver is gone")
+
+    with FakeMLLMServer(target=target, latency=0.3) as srv:
+        judge = MLLMJudge("default", base_url=srv.base_url, swap="never", budget=budget,
+                          max_concurrency=1)  # fmt: skip
+        judge.add_send_gate(gate)
+
+        async def scenario():
+            first = asyncio.create_task(judge.compare(c[0], c[1], Q, Intent()))
+            queued = [asyncio.create_task(judge.compare(c[i], c[i + 1], Q, Intent()))
+                      for i in range(1, 4)]  # fmt: skip
+            while srv.stats.in_flight == 0:
+                await asyncio.sleep(0.01)
+            gone["now"] = True  # while the first is on the server and three wait their turn
+            done = await asyncio.gather(first, *queued, return_exceptions=True)
+            return done
+
+        done = asyncio.run(scenario())
+    assert not isinstance(done[0], BaseException)  # the one sent is answered and kept
+    assert all(isinstance(d, RunCancelled) for d in done[1:])
+    assert srv.stats.requests == 1
+    assert budget.calls == 1 and budget.remaining_calls == 99
+    assert budget._reserved_calls == 0  # nothing left reserved by the stopped requests

@@ -112,11 +112,19 @@ class LeasedJudge:
         self._watch = watch
         self._on_gone = on_gone
         self.name = getattr(judge, "name", type(judge).__name__)
+        # Checked again as each request leaves: comparisons that passed the check below and
+        # then waited for the judge's concurrency are stopped too, not sent after the end.
+        add_gate = getattr(judge, "add_send_gate", None)
+        if add_gate is not None:
+            add_gate(self._check)
 
-    async def compare(self, first, second, aspects, intent):
+    def _check(self) -> None:
         if not self._watch.alive():
             self._on_gone()
             raise RunCancelled("The batch driver is gone; this run stops and resumes later.")
+
+    async def compare(self, first, second, aspects, intent):
+        self._check()
         return await self._judge.compare(first, second, aspects, intent)
 
     def __getattr__(self, name: str):

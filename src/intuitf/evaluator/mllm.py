@@ -63,7 +63,7 @@ import numpy as np
 import openai
 from openai import AsyncOpenAI
 
-from intuitf.errors import BudgetExhausted, JudgeError
+from intuitf.errors import BudgetExhausted, JudgeError, RunCancelled
 from intuitf.evaluator.budget import Budget
 from intuitf.evaluator.cache import VerdictCache, request_key
 from intuitf.evaluator.compose import (
@@ -295,6 +295,7 @@ class MLLMJudge:
         self.rate_limited = 0
         #: Running total of everything this judge spent (and served from cache).
         self.cost = Cost()
+        self._send_gates: list[Callable[[], None]] = []
         self._client: AsyncOpenAI | None = None
         self._limit: AdaptiveLimit | None = None
         self._lock: asyncio.Lock | None = None
@@ -542,6 +543,13 @@ class MLLMJudge:
             "judged so far is kept: continue with `intuitf optimize --resume RUN`.",
         )
 
+    def add_send_gate(self, gate: Callable[[], None]) -> None:
+        """Call ``gate`` right before each request leaves, once its turn has come: an
+        exception it raises stops the request unsent (nothing paid, its budget freed). A
+        batch worker stops this way the moment its driver is gone, including requests that
+        were queued for a turn when it went."""
+        self._send_gates.append(gate)
+
     async def _complete(
         self, messages: list[dict], schema: dict, estimate: float, output_tokens: int
     ) -> tuple[Any, Cost]:
@@ -580,6 +588,8 @@ class MLLMJudge:
                         deadline_hit = True
                         raise _OutOfTime
                     kwargs["timeout"] = min(self.timeout, left)
+                    for gate in self._send_gates:
+                        gate()
                     if self.cache is not None:
                         row = self.cache.begin_spend(self.name, reserved)
                     t0 = time.perf_counter()
@@ -588,6 +598,11 @@ class MLLMJudge:
                 if self.budget is not None:
                     self.budget.release(reserved)
                 break
+            except RunCancelled:  # a send gate stopped it before it left
+                if self.budget is not None:
+                    self.budget.release(reserved)
+                self.cost += cost
+                raise
             except openai.APIStatusError as exc:
                 self._unpaid(reserved, row)
                 self._heard_at = time.monotonic()  # alive, if unhappy
