@@ -43,9 +43,9 @@ class RunSettings:
     device: str = "auto"
     material_hints: bool = True
     #: A model judge names the volume's structures from an atlas first (one request per
-    #: volume, cached); off (the default, for now: its request is not yet counted the way
-    #: the budget's kill-and-resume accounting expects), words are matched to structures by
-    #: their descriptors only.
+    #: volume, cached, paid from the run's budget); off (the default), words are matched to
+    #: structures by their descriptors only. Opt-in while the names' gain over descriptors
+    #: is unmeasured with a real model: every run would pay one more request for it.
     name_structures: bool = False
 
     def validate(self) -> None:
