@@ -147,3 +147,11 @@ def test_fake_server_fault_rates_above_one_are_a_usage_error():
         timeout=120,
     )
     assert proc.returncode == 2 and "within 0..1" in proc.stderr
+
+
+def test_version_prints_the_version_and_exits_0():
+    from intuitf import __version__
+
+    proc = _intuitf("--version")
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == f"intuitf {__version__}"

@@ -22,6 +22,28 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 
+
+def _print_version(value: bool) -> None:
+    if value:
+        from intuitf import __version__
+
+        typer.echo(f"intuitf {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(
+    version: bool = typer.Option(
+        False,
+        "--version",
+        callback=_print_version,
+        is_eager=True,
+        help="Show intuitf's version and exit.",
+    ),  # fmt: skip
+) -> None:
+    """Design transfer functions for direct volume rendering from what you want."""
+
+
 #: Modules under intuitf.cli that contribute commands (each has ``register(app)``).
 COMMAND_MODULES = [
     "intuitf.cli.volume_cmds",
