@@ -7,7 +7,8 @@ class to build (a subclass, such as the web's live session, gets its own kind ba
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -136,15 +137,11 @@ def create_session(
     settings = _with_default_camera(settings or RunSettings(), volume, spec)
     settings.validate()
     rd, lock = _locked(run_dir)
-    try:
+    with _released_on_failure(lock):
         return _new(
             cls, volume, intent, judge or _metric_judge(), settings, rd, list(initial), overwrite,
             spec, lock,
         )  # fmt: skip
-    except BaseException:
-        if lock is not None:
-            lock.release()
-        raise
 
 
 def _new(
@@ -253,15 +250,11 @@ def refine_session(
         kind="edit", text=instruction, selected=tuple(int(i) for i in selected), about=about
     )
     rd, lock = _locked(run_dir)
-    try:
+    with _released_on_failure(lock):
         settings = _with_default_camera(settings or RunSettings(), volume, None)
         return _refine_from(
             cls, volume, tf, intent, judge or _metric_judge(), settings, rd, None, overwrite, lock,
         )  # fmt: skip
-    except BaseException:
-        if lock is not None:
-            lock.release()
-        raise
 
 
 def _refine_from(
@@ -572,6 +565,17 @@ def _judge_history(spec: RunSpec, generation: int) -> list[dict[str, Any]]:
     from intuitf.evaluator.factory import judge_record
 
     return judge_record(spec.judge.spec, spec.judge.base_url, generation)["judges"]
+
+
+@contextmanager
+def _released_on_failure(lock: RunLock | None) -> Iterator[None]:
+    """Release ``lock`` when the block raises (the run was not opened), then re-raise."""
+    try:
+        yield
+    except BaseException:
+        if lock is not None:
+            lock.release()
+        raise
 
 
 def _locked(run_dir: str | Path | None) -> tuple[RunDirectory | None, RunLock | None]:
