@@ -359,6 +359,31 @@ def test_query_on_a_live_run_starts_a_stage_at_the_next_boundary(client):
     assert d["info"]["generations_done"] in (2, 3)
 
 
+def test_a_failing_run_says_how_it_ended_before_it_stops_being_live(client, monkeypatch):
+    """A status read between the two must not find a run cut off by a crash ("interrupted")."""
+    from intuitf.session.events import EventLog
+    from intuitf.session.live import LiveSession
+
+    async def broken(self):
+        raise RuntimeError("kaboom")
+
+    live_at_end: list[bool] = []
+    emit = EventLog.emit
+
+    def watching(self, type, **data):
+        if type == "run_ended":
+            entry = client.app.state.web.registry.entry("broken-order")
+            live_at_end.append(entry is not None and entry.live)
+        return emit(self, type, **data)
+
+    monkeypatch.setattr(LiveSession, "astep", broken)
+    monkeypatch.setattr(EventLog, "emit", watching)
+    r = client.post("/api/runs", json={"volume": "phantom", "name": "broken-order"})
+    d = wait_run(client, r.json()["name"])
+    assert d["info"]["status"] == "error"
+    assert live_at_end == [True]
+
+
 def test_a_run_that_fails_says_so_in_its_events(client, monkeypatch):
     from intuitf.session.live import LiveSession
 

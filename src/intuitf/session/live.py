@@ -171,10 +171,12 @@ class LiveRun:
                     outcome = self.outcome = await s.arun(write_outputs=False)
                 except Exception as exc:  # a bug, not a run condition: say so, then close
                     log.exception("run %s failed", self.name)
-                    with self._lock:
-                        self.state = "closing"
+                    # The event first: once the run is no longer live, a status read looks
+                    # for how it ended, and must not find a run cut off by a crash.
                     s.events.emit("run_ended", reason="error", message=f"The run failed: {exc}",
                                   generation=s.generation)  # fmt: skip
+                    with self._lock:
+                        self.state = "closing"
                     return
                 # Changes handed over while the run ended are applied before deciding: a
                 # query made meanwhile (or during the last generation) extends the run.
