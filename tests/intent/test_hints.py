@@ -208,3 +208,18 @@ def test_the_background_stays_hidden_unless_the_words_name_air():
     assert not any(bg[0].reaches(h.center) for h in hints if h.name != "background")
     with_air = explorer_hints(Intent(kind="text", text="blue air, white bone"), vol)
     assert not any(h["name"] == "background" for h in with_air)
+
+
+def test_values_under_the_background_are_hidden_too():
+    """A scan whose air sits at 0.3 with padding at 0 outside its field of view: the padding
+    is background as well (lit, it paints a face of the box)."""
+    rng = np.random.default_rng(2)
+    data = rng.normal(0.3, 0.01, (24, 24, 24))
+    data[:, :, :2] = 0.0  # padding along one face
+    data[6:18, 6:18, 6:18] = rng.normal(0.7, 0.02, (12, 12, 12))
+    vol = Volume.from_array(data.clip(0, 1).astype(np.float32), value_range=(0.0, 1.0))
+    hints = as_hints(explorer_hints(Intent(kind="text", text="opaque white bone"), vol))
+    hidden = [h for h in hints if h.hidden]
+    assert {h.name for h in hidden} == {"background", "padding"}
+    assert any(h.reaches(0.0) for h in hidden) and any(h.reaches(0.3) for h in hidden)
+    assert not any(h.reaches(0.7) for h in hidden)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+from scipy import ndimage
 
 from intuitf.evaluator.metric import MetricJudge
 from intuitf.evaluator.types import Intent
@@ -83,3 +84,41 @@ def test_the_metric_judge_measures_each_stroke_alike():
     assert j.score(both, "stroke_color_agreement", intent) > j.score(
         red_only, "stroke_color_agreement", intent
     )
+
+
+def capped() -> tuple[Volume, np.ndarray, np.ndarray]:
+    """A block whose upper half is solid 0.9 and whose lower half is 0.6 under a two-voxel
+    0.9 skin (a tooth's enamel: thick on the crown, thin at its lower edge), and the masks
+    (z, y, x) of the two halves."""
+    d = np.full((40, 40, 40), 0.02, np.float32)
+    upper = np.zeros(d.shape, bool)
+    lower = np.zeros(d.shape, bool)
+    # The camera below looks along y: the halves lie apart along z, the skin is across y.
+    upper[21:30, 6:34, 10:30] = True
+    lower[10:19, 6:34, 10:30] = True
+    d[upper] = 0.9
+    d[lower] = 0.9
+    d[12:17, 8:32, 12:28] = 0.6
+    return Volume.from_array(d, value_range=(0.0, 1.0)), upper, lower
+
+
+def test_two_strokes_on_one_material_go_to_it_and_to_the_material_behind_the_thin_one():
+    vol, upper, lower = capped()
+    cam = Camera(azimuth=0.0, elevation=0.0)
+    size = 64
+    r = VolumeRenderer(Volume.from_array(upper.astype(np.float32)), size=size, shading=False)
+    tf = GaussianTF((Gaussian(1.0, 0.1, 0.8, (1, 1, 1)),))
+    up = r.render_rgba(tf, cam)[..., 3] > 0.5
+    r = VolumeRenderer(Volume.from_array(lower.astype(np.float32)), size=size, shading=False)
+    low = r.render_rgba(tf, cam)[..., 3] > 0.5
+    sk = np.zeros((size, size, 4), np.uint8)
+    assert not (up & low).any()
+    for mask, colour in ((up, (220, 30, 30)), (low, (240, 220, 40))):
+        m = ndimage.binary_erosion(mask, iterations=3)
+        assert m.sum() > 20
+        sk[m, :3], sk[m, 3] = colour, 255
+    got = {h.rgb[1] > 0.5: h for h in stroke_hints(sk, vol.data, vol.spacing, cam, 0.1)}
+    red, yellow = got[False], got[True]
+    # Both strokes lie on 0.9: red keeps it, yellow means what its thin skin covers.
+    assert abs(red.center - 0.9) < 0.03
+    assert abs(yellow.center - 0.6) < 0.03

@@ -25,7 +25,8 @@ aspect key                     measure (higher is better unless noted)
                                rendering whatever it shows) only what a text says checkably:
                                named colours ("red", "ivory",
                                "bone white", ...) must cover part of the foreground (share of
-                               foreground pixels within ΔE 25 of each, saturating at 5 %);
+                               foreground pixels near each, a pixel counting fully within ΔE
+                               6 and not at all beyond ΔE 25, saturating at 5 %);
                                "opaque" / "semi-opaque" / "transparent" / "faint" against the
                                mean colour distance of the foreground from the background;
                                "colorful" / "vibrant" against colour variety; "high-contrast"
@@ -34,7 +35,11 @@ aspect key                     measure (higher is better unless noted)
                                judged by feature discrimination; otherwise it is a tie.
 ``color_style_matching``       CIELAB colour-distribution similarity to the reference image:
                                intersection of coarse (L*, a*, b*) histograms of both
-                               foregrounds, minus the distance of their mean colours / 100
+                               foregrounds, minus the distance of their mean colours / 100,
+                               minus the mean CIE76 distance / 100 of the object's outline
+                               colour and of its inside colour (each brightened to one
+                               value: their hues) to the reference's (where the colours
+                               are: faint red skin around ivory bone)
 ``structural_style_matching``  SSIM of the luminance to the reference's, both resized to
                                128 x 128
 ``stroke_color_agreement``     minus the mean over strokes (the pixels of one colour) of
@@ -80,6 +85,7 @@ from skimage.transform import resize
 from intuitf.evaluator.metric_quality import Quality, quality
 from intuitf.evaluator.types import Aspect, Choice, Cost, Intent, Verdict, weighted_overall
 from intuitf.intent.colours import NAMED_COLOURS, named_colours
+from intuitf.intent.reference import outline_and_inside
 
 #: Colour names a text may use, as sRGB (0-255). Multi-word names are matched first.
 # Typos such as "opque" / "opqaue" occur in real prompts; match them too.
@@ -89,8 +95,12 @@ _TRANSPARENT_RE = re.compile(r"\b(transparent|faint|ghost\w*|see[- ]through)\b")
 _COLOURFUL_RE = re.compile(r"\b(colou?rful|vibrant|rainbow|multicolou?red|diverse colou?rs)\b")
 _CONTRAST_RE = re.compile(r"\bhigh[- ]contrast\b")
 
-#: ΔE within which a pixel counts as showing a named colour.
+#: ΔE within which a pixel counts as showing a named colour (fully within ``_ON_COLOUR``,
+#: less the farther it is).
 _NAMED_DELTA_E = 25.0
+_ON_COLOUR = 6.0
+#: Hue difference (degrees) within which a pixel of a named colour's hue counts fully.
+_ON_HUE = 10.0
 #: Share of the foreground at which a named colour counts as fully present.
 _NAMED_SATURATION = 0.05
 #: Share of the foreground at which a colour a clause names counts as fully shown.
@@ -115,6 +125,26 @@ class _Features:
     mean_lab: np.ndarray
     gray128: np.ndarray  # luminance in [0, 1], 128 x 128
     quality: Quality  # clarity, separation, richness, discrimination (metric_quality)
+    rgb: np.ndarray | None = None  # the picture (uint8), for measures made on demand
+    _layers: tuple | None = None  # (outline Lab, inside Lab) or (), once asked for
+
+    def layers(self) -> tuple:
+        """CIELAB of the object's outline band and of its inside, each brightened to a value
+        (max channel) of 0.95, () when it has no both
+        (:func:`intuitf.intent.reference.outline_and_inside`); worked out once.
+
+        Brightened, because at an outline every material shows dark (a faint one dimmed by
+        its opacity, an opaque one by the headlight at grazing angles): what tells faint red
+        skin from an opaque grey one there is the hue, not the lightness.
+        """
+        if self._layers is None:
+            found = outline_and_inside(self.rgb) if self.rgb is not None else None
+            self._layers = () if found is None else tuple(
+                rgb2lab((np.clip(c, 0, 1) * 0.95 / max(float(c.max()), 1e-3))[None, None]
+                        .astype(np.float32))[0, 0]
+                for c in found
+            )  # fmt: skip
+        return self._layers
 
 
 def _digest(arr: np.ndarray) -> str:
@@ -178,7 +208,7 @@ def _features(image: np.ndarray) -> _Features:
     gray128 = resize(lab[..., 0] / 100.0, (128, 128), anti_aliasing=True).astype(np.float64)
     return _Features(
         lab, fg, bg_lab, coverage, float(entropy), float(variety), contrast, opacity,
-        lab_hist, mean_lab, gray128, quality(rgb),
+        lab_hist, mean_lab, gray128, quality(rgb), rgb,
     )  # fmt: skip
 
 
@@ -350,7 +380,18 @@ class MetricJudge:
             return None
         r = self.features(intent.reference)
         inter = float(np.minimum(f.lab_hist, r.lab_hist).sum())
-        return inter - float(np.linalg.norm(f.mean_lab - r.mean_lab)) / 100.0
+        score = inter - float(np.linalg.norm(f.mean_lab - r.mean_lab)) / 100.0
+        # Where the colours are: the outline's colour and the inside's, as the reference
+        # shows them (a faint red outline around ivory: skin over bone). Matching the colours
+        # alone lets an opaque ivory skin over a hidden skull pass for the foot's bone.
+        ref_layers = r.layers()
+        if ref_layers:
+            mine = f.layers()
+            if not mine:
+                return score - LAYER_WEIGHT
+            de = [float(np.linalg.norm(a - b)) for a, b in zip(mine, ref_layers, strict=True)]
+            score -= LAYER_WEIGHT * min(1.0, float(np.mean(de)) / 100.0)
+        return score
 
     def _ref_structure(self, f: _Features, intent: Intent) -> float | None:
         if intent.reference is None:
@@ -449,7 +490,8 @@ def _colour_clauses(text: str) -> list[tuple[str, str | None]]:
 def _clause_presence(f: _Features, name: str, mod: str | None) -> float:
     """How well the foreground shows colour ``name`` with the look ``mod`` asks for.
 
-    Opaque (or unqualified): pixels within ΔE 25 of the colour. Faint or semi-opaque: a
+    Opaque (or unqualified): pixels near the colour, each counting the more the nearer
+    (fully within ΔE 6, not at all beyond ΔE 25). Faint or semi-opaque: a
     translucent layer over the background keeps the colour's hue but loses chroma and
     lightness, so pixels whose hue is within 30° of the colour's, with some chroma, count;
     pixels at full strength count less for "faint" (they look solid).
@@ -458,7 +500,7 @@ def _clause_presence(f: _Features, name: str, mod: str | None) -> float:
     if pix.shape[0] == 0:
         return 0.0
     target = _named_lab([name])[0]
-    near = np.linalg.norm(pix - target, axis=1) < _NAMED_DELTA_E
+    near = _nearness(pix, target)
     if np.hypot(target[1], target[2]) < 12:
         # Achromatic colours (white, ivory, grey) have no hue to follow: match them directly.
         return _saturating(near.mean(), _CLAUSE_SATURATION)
@@ -468,8 +510,9 @@ def _clause_presence(f: _Features, name: str, mod: str | None) -> float:
     dh = np.abs(np.angle(np.exp(1j * (hue - t_hue))))
     if mod in (None, "opaque"):
         # On the colour, or clearly of its hue (a solid part seen through a translucent layer
-        # keeps its hue but not its lightness): the latter counts a little over half.
-        hued = (dh < np.radians(30)) & (chroma > 20)
+        # keeps its hue but not its lightness): the latter counts a little over half, more
+        # the closer the hue.
+        hued = np.clip((np.radians(30) - dh) / np.radians(30 - _ON_HUE), 0.0, 1.0) * (chroma > 20)
         return max(_saturating(near.mean(), _CLAUSE_SATURATION),
                    HUE_CREDIT * _saturating(hued.mean(), _CLAUSE_SATURATION))  # fmt: skip
     tinted = (dh < np.radians(30)) & (chroma > 8)
@@ -516,16 +559,24 @@ def _off_palette(f: _Features, names: Sequence[str]) -> float:
 
 
 def _colour_presence(f: _Features, names: Sequence[str], region: np.ndarray) -> float:
-    """Mean over names of the (saturating) share of region pixels near each named colour."""
+    """Mean over names of the (saturating) share of region pixels near each named colour
+    (:func:`_nearness`)."""
     pix = f.lab[region]
     if pix.shape[0] == 0:
         return 0.0
     targets = _named_lab(names)
     shares = []
     for t in targets:
-        near = np.linalg.norm(pix - t, axis=1) < _NAMED_DELTA_E
-        shares.append(min(1.0, near.mean() / _NAMED_SATURATION))
+        shares.append(min(1.0, float(_nearness(pix, t).mean()) / _NAMED_SATURATION))
     return float(np.mean(shares))
+
+
+def _nearness(pix: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Per pixel, how much it shows colour ``target``: 1 within ΔE ``_ON_COLOUR``, falling
+    to 0 at ΔE ``_NAMED_DELTA_E``. Graded, not a threshold: orange and gold are both near
+    orange, only one of them is orange."""
+    de = np.linalg.norm(pix - target, axis=1)
+    return np.clip((_NAMED_DELTA_E - de) / (_NAMED_DELTA_E - _ON_COLOUR), 0.0, 1.0)
 
 
 def _edit_region(intent: Intent, shape: tuple[int, int]) -> np.ndarray | None:
@@ -542,6 +593,9 @@ HUE_CREDIT = 0.6
 
 #: Text alignment kept when the picture's silhouette is the volume's box (a painted box).
 BOX_TEXT_PENALTY = 0.35
+#: Weight of the outline-and-inside colour distance in ``color_style_matching`` (the
+#: histogram intersection it is added to lies in [0, 1]).
+LAYER_WEIGHT = 1.0
 
 #: Words asking for a clear picture of the structures (checked by feature discrimination).
 _CLEAR_RE = re.compile(r"\b(clear(ly|er)?|structures?|details?|distinguish\w*|see)\b")

@@ -434,6 +434,10 @@ def place_hints(
             # surrounds it, and wide enough to hold the rest of them.
             center = a + 0.35 * (b - a)
             spread = max(0.012, (b - a) / 4.0)
+            if not st.background and center > layout.cutoff:
+                # Its tail stays off the background's values, as a material's does: a faint
+                # outer layer's tail over the air is a fog over the whole box.
+                spread = min(spread, max(0.004, (center - layout.cutoff) / 2.5))
             thin = st.shape in ("thin", "branching", "scattered", "plate")
             placed.append(_with(h, center=float(center), spread=float(spread),
                                 placed_by="structure", structure=st.id, thin=thin))  # fmt: skip
@@ -648,13 +652,32 @@ def intent_hints(intent: Intent, volume=None, structures: StructureMap | None = 
         return parsed
     if volume is None:
         return parsed
+    exact: dict[str, tuple] = {}
+    if not parsed.hints and intent.kind == "image" and intent.reference is not None:
+        parsed, exact = _reference_hints(intent.reference)
     counts, _ = volume.histogram()
     if structures is None and any(h.role == "part" or h.material == "bone" for h in parsed.hints):
         structures = structure_map_of(volume)
-    return place_hints(
+    placed = place_hints(
         parsed, counts, tuple(volume.value_range), getattr(volume, "original_dtype", None),
         structures=structures,
     )  # fmt: skip
+    if exact:  # a reference picture's own colours, not their nearest names
+        placed.hints = [_with(h, rgb=exact.get(h.words, h.rgb)) for h in placed.hints]
+    return placed
+
+
+def _reference_hints(image) -> tuple[TextHints, dict[str, tuple]]:
+    """A reference picture's layers as parsed words, and each layer's exact colour by words."""
+    from intuitf.intent.reference import reference_layers, reference_words
+
+    layers = reference_layers(image)
+    if not layers:
+        return parse_text(None), {}
+    parsed = parse_text(reference_words(layers))
+    parsed.notes.append("from the reference picture: " + reference_words(layers))
+    exact = {f"{kind} part": rgb for kind, rgb, _ in layers}
+    return parsed, exact
 
 
 _MAPS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -706,7 +729,9 @@ def explorer_hints(
     Whatever the intent (text, picture, sketch, or none), the background's values get a
     hint of their own: hidden, unless the words name air. Nobody asks for the empty space
     around the object to be painted, and a faint Gaussian there is a veil over the whole
-    volume box. (An edit changes selected features only: it gets no background hint.)
+    volume box. Values under the background's mode (padding outside a scanner's field of
+    view) get a hidden "padding" hint too. (An edit changes selected features only: it gets
+    no background hint.)
 
     A sketch, with the ``camera`` its base picture was rendered from (a ``Camera`` or its
     dict), gives a hint per stroke: its colour on the values under it
@@ -722,12 +747,23 @@ def explorer_hints(
         counts, _ = volume.histogram()
         layout = _Layout.of(np.asarray(counts, dtype=np.float64), _materials(counts))
         top = min([layout.cutoff] + [h.center - 2.5 * h.spread for h in placed])
+        spread = 0.0
         if top > layout.background + 0.01:
             # Reaches (2.5 spreads) from the background's mode up to just below the cutoff.
             spread = (top - layout.background) / 2.5
             out.append(
                 {"name": "background", "center": layout.background, "spread": spread,
                  "color": None, "height": None, "hidden": True}
+            )  # fmt: skip
+        below = layout.background - spread
+        if below > 0.01 and not any(h.center - 2.5 * h.spread < below for h in placed):
+            # Values under the background's mode (a scanner's padding outside its field of
+            # view, an empty face of the box) are background too: lit, they paint a face of
+            # the box. One spread below 0 to 2.5 above the gap's top covers them.
+            s = below / 3.5
+            out.append(
+                {"name": "padding", "center": s, "spread": s, "color": None, "height": None,
+                 "hidden": True}
             )  # fmt: skip
     return out
 

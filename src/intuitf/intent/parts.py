@@ -76,9 +76,18 @@ def _dentin(s, c):
     return 1.5 * min(1.0, 2 * s.share) + 1.0 * (1.0 - abs(c.rank(s) - 0.5))
 
 
+#: A part under this share of the object cannot be the layer around it (a speck of partial
+#: volume with the lowest values would otherwise win "outer" and "skin" on rank alone).
+_LAYER_SHARE = 0.05
+
+
+def _layer(s: Structure) -> float:
+    return 0.0 if s.share >= _LAYER_SHARE else -3.0
+
+
 def _outer(s, c):
     return (2.0 * (1.0 - c.rank(s)) + 1.0 * min(1.0, 2 * s.share) + (0.5 if s.outer else 0.0)
-            - (1.0 if s.enclosed_by is not None else 0.0))  # fmt: skip
+            - (1.0 if s.enclosed_by is not None else 0.0) + _layer(s))  # fmt: skip
 
 
 def _inner(s, c):
@@ -87,7 +96,8 @@ def _inner(s, c):
 
 
 def _skin(s, c):
-    return 2.0 * (1.0 - c.rank(s)) + 1.0 * min(1.0, 2 * s.share) + (0.5 if s.outer else 0.0)
+    return (2.0 * (1.0 - c.rank(s)) + 1.0 * min(1.0, 2 * s.share) + (0.5 if s.outer else 0.0)
+            + _layer(s))  # fmt: skip
 
 
 def _bone(s, c):

@@ -25,6 +25,15 @@ from intuitf.render.camera import Camera
 SURFACE_DEPTH = 3.0
 #: Most pixels used per stroke (a random subset of a longer one).
 MAX_PIXELS = 400
+#: Depth (voxels) past the surface layer where the material behind it is looked for.
+BEHIND_DEPTH = 8.0
+#: Values this far (normalised) from the surface's are another material.
+OTHER_MATERIAL = 0.08
+#: Two strokes whose surface values are closer than this (normalised) lie on one material.
+SAME_MATERIAL = 0.03
+#: A stroke moves to the material behind its surface when at least this share of its pixels
+#: see one there.
+BEHIND_SHARE = 0.5
 
 
 @dataclass(frozen=True)
@@ -96,6 +105,22 @@ def surface_values(
 ) -> np.ndarray:
     """Per pixel (row, col) of a picture of ``size`` (width, height): the densest value within
     ``SURFACE_DEPTH`` voxels behind where its ray first exceeds ``threshold`` (NaN: no hit)."""
+    return layer_values(data, spacing, camera, size, rows, cols, threshold)[0]
+
+
+def layer_values(
+    data: np.ndarray,
+    spacing: tuple[float, float, float],
+    camera: Camera,
+    size: tuple[int, int],
+    rows: np.ndarray,
+    cols: np.ndarray,
+    threshold: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per pixel: the surface value (as :func:`surface_values`) and the value of the material
+    right behind that surface: the median, within ``BEHIND_DEPTH`` voxels after the surface
+    layer, of the object's values at least ``OTHER_MATERIAL`` from the surface value (NaN:
+    no hit, or the surface material goes on that deep)."""
     sp = np.asarray(spacing, dtype=np.float64)
     shape_xyz = np.asarray(data.shape[::-1], dtype=np.float64)
     extent = (shape_xyz - 1.0) * sp
@@ -109,8 +134,9 @@ def surface_values(
     t0 = np.maximum(t0, 0.0)
     n = int(np.ceil(float(np.max(t1 - t0, initial=0.0)) / step)) + 1
     out = np.full(len(rows), np.nan)
+    behind = np.full(len(rows), np.nan)
     if n <= 1:
-        return out
+        return out, behind
     ts = t0[:, None] + step * np.arange(n)[None]
     pts = o[:, None, :] + ts[..., None] * d[:, None, :]  # world (x, y, z)
     idx = pts / sp  # voxel (x, y, z)
@@ -123,10 +149,22 @@ def surface_values(
     hit = above.any(axis=1)
     first = np.argmax(above, axis=1)
     depth = int(np.ceil(SURFACE_DEPTH * float(sp.min()) / step))
+    deeper = int(np.ceil(BEHIND_DEPTH * float(sp.min()) / step))
     for k in np.flatnonzero(hit):
         a = int(first[k])
         out[k] = float(vals[k, a : a + depth + 1].max())
-    return out
+        # Past the surface layer: where the surface material stops, what comes next.
+        run = vals[k, a + depth + 1 : a + depth + 1 + deeper]
+        other = run[(run > threshold) & (np.abs(run - out[k]) >= OTHER_MATERIAL)]
+        if other.size >= 2:
+            behind[k] = float(np.median(other))
+    return out, behind
+
+
+def _centre(values: np.ndarray) -> tuple[float, float]:
+    """(median, spread) of a stroke's values: half the interquartile range as a deviation."""
+    lo, med, hi = np.percentile(values, [25, 50, 75])
+    return float(med), max(0.012, float(hi - lo) / 1.35 / 2)
 
 
 def stroke_hints(
@@ -141,6 +179,14 @@ def stroke_hints(
 
     ``threshold`` is the background's upper value (normalised): a ray enters the object where
     it first exceeds it.
+
+    Two strokes on one material (the paper's tooth: red on the enamel's top, yellow on its
+    thin lower edge) cannot both colour it: a 1-D TF colours values, not places. Of such a
+    pair, the stroke that sees another material right behind its surface on at least
+    ``BEHIND_SHARE`` of its pixels (the dentin under the enamel's thin edge) is taken to mean
+    that material ("red crown, yellow dentin", as the paper reads that sketch); the other
+    keeps the surface. Strokes whose values still overlap are pulled apart at the midpoint
+    between their medians.
     """
     sk = np.asarray(sketch)
     height, width = sk.shape[:2]
@@ -151,20 +197,48 @@ def stroke_hints(
         if len(rr) > MAX_PIXELS:
             pick = rng.choice(len(rr), MAX_PIXELS, replace=False)
             rr, cc = rr[pick], cc[pick]
-        v = surface_values(data, spacing, camera, (width, height), rr, cc, threshold)
+        v, b = layer_values(data, spacing, camera, (width, height), rr, cc, threshold)
         ok = v[np.isfinite(v)]
         if ok.size < 3:
             continue
-        lo, med, hi = np.percentile(ok, [25, 50, 75])
-        found.append([rgb, int(mask.sum()), float(med), max(0.012, float(hi - lo) / 1.35 / 2),
-                      ok.size / len(v)])  # fmt: skip
+        med, spread = _centre(ok)
+        behind = b[np.isfinite(b)]
+        found.append(_Stroke(rgb, int(mask.sum()), med, spread, ok.size / len(v), behind,
+                             behind.size / len(v)))  # fmt: skip
+    for one in found:
+        for other in found:
+            if one is other or abs(one.center - other.center) >= SAME_MATERIAL:
+                continue
+            mover = max((one, other), key=lambda f: f.behind_share)
+            if mover.behind_share >= BEHIND_SHARE and mover.behind.size >= 3:
+                mover.center, mover.spread = _centre(mover.behind)
+                mover.behind_share = 0.0  # moved once
     # Strokes on overlapping values: each keeps to its side of the midpoint between medians.
-    found.sort(key=lambda f: f[2])
-    for a, b in zip(found, found[1:], strict=False):
-        gap = b[2] - a[2]
-        if gap < 2.5 * (a[3] + b[3]):
-            a[3] = b[3] = max(0.006, gap / 5.0)
+    found.sort(key=lambda f: f.center)
+    for low, high in zip(found, found[1:], strict=False):
+        gap = high.center - low.center
+        if gap < 2.5 * (low.spread + high.spread):
+            low.spread = high.spread = max(0.006, gap / 5.0)
     return [
-        StrokeHint(tuple(c / 255.0 for c in rgb), n, med, sp, share)
-        for rgb, n, med, sp, share in found
+        StrokeHint(
+            (f.rgb[0] / 255.0, f.rgb[1] / 255.0, f.rgb[2] / 255.0),
+            f.pixels,
+            f.center,
+            f.spread,
+            f.hit_share,
+        )  # fmt: skip
+        for f in found
     ]
+
+
+@dataclass
+class _Stroke:
+    """A stroke while its values are worked out (see :func:`stroke_hints`)."""
+
+    rgb: tuple[int, ...]
+    pixels: int
+    center: float
+    spread: float
+    hit_share: float
+    behind: np.ndarray  # values of the material behind its surface, per pixel that has one
+    behind_share: float
