@@ -34,6 +34,10 @@ SAME_MATERIAL = 0.03
 #: A stroke moves to the material behind its surface when at least this share of its pixels
 #: see one there.
 BEHIND_SHARE = 0.5
+#: Gaussian heights of a stroke's material: visible, or translucent where another stroke
+#: looks through its thin parts (a thick part, many samples deep, still shows opaque).
+VISIBLE = (0.05, 0.8)
+SEE_THROUGH = (0.03, 0.25)
 
 
 @dataclass(frozen=True)
@@ -45,14 +49,17 @@ class StrokeHint:
     center: float  # normalised value the stroke's surface has (median)
     spread: float
     hit_share: float  # of its pixels whose ray met the object
+    #: Gaussian heights: visible by default; translucent for a material another stroke looks
+    #: through where it is thin (see :func:`stroke_hints`).
+    height: tuple[float, float] = (0.05, 0.8)
 
-    def to_explorer(self, height: tuple[float, float] = (0.05, 0.8)) -> dict:
+    def to_explorer(self) -> dict:
         return {
             "name": "stroke",
             "center": float(self.center),
             "spread": float(self.spread),
             "color": list(self.rgb),
-            "height": list(height),
+            "height": list(self.height),
             "hidden": False,
         }
 
@@ -185,7 +192,8 @@ def stroke_hints(
     pair, the stroke that sees another material right behind its surface on at least
     ``BEHIND_SHARE`` of its pixels (the dentin under the enamel's thin edge) is taken to mean
     that material ("red crown, yellow dentin", as the paper reads that sketch); the other
-    keeps the surface. Strokes whose values still overlap are pulled apart at the midpoint
+    keeps the surface, translucent (``SEE_THROUGH``): opaque where it is thick, seen through
+    where it is thin, so that both colours show where they were drawn. Strokes whose values still overlap are pulled apart at the midpoint
     between their medians.
     """
     sk = np.asarray(sketch)
@@ -209,10 +217,12 @@ def stroke_hints(
         for other in found:
             if one is other or abs(one.center - other.center) >= SAME_MATERIAL:
                 continue
-            mover = max((one, other), key=lambda f: f.behind_share)
+            mover, stays = sorted((one, other), key=lambda f: f.behind_share, reverse=True)
             if mover.behind_share >= BEHIND_SHARE and mover.behind.size >= 3:
                 mover.center, mover.spread = _centre(mover.behind)
                 mover.behind_share = 0.0  # moved once
+                # Its colour shows only where the material on top is thin and translucent.
+                stays.height = SEE_THROUGH
     # Strokes on overlapping values: each keeps to its side of the midpoint between medians.
     found.sort(key=lambda f: f.center)
     for low, high in zip(found, found[1:], strict=False):
@@ -226,7 +236,8 @@ def stroke_hints(
             f.center,
             f.spread,
             f.hit_share,
-        )  # fmt: skip
+            f.height,
+        )
         for f in found
     ]
 
@@ -242,3 +253,4 @@ class _Stroke:
     hit_share: float
     behind: np.ndarray  # values of the material behind its surface, per pixel that has one
     behind_share: float
+    height: tuple[float, float] = VISIBLE
