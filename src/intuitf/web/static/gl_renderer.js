@@ -167,8 +167,9 @@ export class GLVolumeRenderer {
 
   /** The render program for `kind` ({shading, gradient}), compiled once. */
   _program(kind) {
+    const full = { ...kind, shininess: DEFAULTS.shade[3] };
     const key = `${kind.shading ? "s" : "u"}${kind.gradient ? "g" : "d"}${kind.packed ? "p" : ""}`;
-    if (!this.progRender[key]) this.progRender[key] = program(this.gl, VERTEX, renderSource(kind));
+    if (!this.progRender[key]) this.progRender[key] = program(this.gl, VERTEX, renderSource(full));
     return this.progRender[key];
   }
 

@@ -128,13 +128,34 @@ ivec3 blockOf(vec3 p) {
 `;
 
 /**
+ * GLSL for x^n (x in [0, 1]) by repeated squaring when the specular exponent `n` is a whole
+ * number up to 64 (the page's 24: five multiplications), else exp2(n·log2 x) with the
+ * uniform. In software a multiplication costs a fraction of exp2 and log2 (measured on the
+ * bonsai at 512²: shaded frames 10–20 % faster), and the picture is the same.
+ */
+function specularPower(n) {
+  if (!Number.isInteger(n) || n < 1 || n > 64) {
+    return "float specPow(float x) { return exp2(u_shade.w * log2(max(x, 1e-30))); }";
+  }
+  const lines = ["float specPow(float x) {", "  float p1 = x;"];
+  const used = [];
+  for (let k = 0; 1 << k <= n; k++) {
+    if (k > 0) lines.push(`  float p${1 << k} = p${1 << (k - 1)} * p${1 << (k - 1)};`);
+    if (n & (1 << k)) used.push(`p${1 << k}`);
+  }
+  lines.push(`  return ${used.join(" * ")};`, "}");
+  return lines.join("\n");
+}
+
+/**
  * The ray marcher's source for one kind of picture: `shading` (Blinn–Phong or emission only)
  * and `gradient` (normals from the 8-bit gradient texture, or central differences of the
  * volume texture). Each kind is its own program: a software rasteriser runs a branch on a
  * uniform inside the loop at a real cost, a constant one not at all. `packed`: the gradient
  * texture also holds the 8-bit value (alpha), so a shaded sample is one fetch in all.
+ * `shininess`: the specular exponent, built in (see specularPower).
  */
-export function renderSource({ shading, gradient, packed = false }) {
+export function renderSource({ shading, gradient, packed = false, shininess = null }) {
   return `#version 300 es
 #define SHADING ${shading ? 1 : 0}
 #define GRADIENT_TEXTURE ${gradient ? 1 : 0}
@@ -146,6 +167,8 @@ uniform vec2 u_gcode;      // gradient = (texel - u_gcode.x) * u_gcode.y, normal
 uniform vec3 u_bg;
 uniform int u_alphaOut;    // 1: premultiplied RGBA (for compositing in the page), 0: over u_bg
 out vec4 outColor;
+
+${specularPower(shininess)}
 
 void main() {
   vec3 o, d;
@@ -187,7 +210,7 @@ ${MARCH}#if PACKED_VALUE
           float inv = inversesqrt(max(m2, 1e-12));
           bool lit = m2 >= 1e-6;
           float ndl = lit ? abs(dot(g, l)) * inv : 1.0;
-          float sp = lit ? exp2(u_shade.w * log2(max(abs(dot(g, h)) * inv, 1e-30))) : 0.0;
+          float sp = lit ? specPow(min(abs(dot(g, h)) * inv, 1.0)) : 0.0;
           c = min(vec3(1.0), c * (u_shade.x + u_shade.y * ndl) + u_shade.z * sp);
 #endif
           float w = tr * a;
