@@ -84,6 +84,10 @@ def test_finished_run_detail_gallery_and_tree(client, done_run):
     assert done_run["camera"] == default_camera(phantom())
     volume_ids = [v["id"] for v in client.get("/api/volumes").json()]
     assert done_run["volume_id"] in volume_ids
+    # The page previews a volume from the same view, before any run.
+    got = client.get(f"/api/volumes/{done_run['volume_id']}/camera")
+    assert got.status_code == 200 and got.json()["camera"] == done_run["camera"]
+    assert client.get("/api/volumes/no-such-volume/camera").status_code == 404
     runs = client.get("/api/runs").json()
     assert any(r["name"] == name and r["status"] == "completed" for r in runs)
     tree = client.get("/api/tree").json()

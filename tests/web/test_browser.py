@@ -155,6 +155,14 @@ def test_page_loads_safely_and_previews_the_phantom(page, web_server, browser, s
     assert page.locator("#volume-select option[value=phantom]").count() == 1
     wait_full_frame(page, timeout=FIRST_GALLERY_S)
     assert page.get_attribute("#tf-canvas", "data-gaussians") not in (None, "0")
+    # Previewed from the view its runs would judge from (upright, chosen for the volume).
+    view = web_server.api("GET", "/api/volumes/phantom/camera")["camera"]
+    page.wait_for_function(
+        "a => Math.abs(window.intuitfDebug.state.camera.azimuth - a) < 0.01", arg=view["azimuth"]
+    )
+    cam = page.evaluate("window.intuitfDebug.state.camera")
+    assert abs(cam["elevation"] - view["elevation"]) < 0.01
+    assert abs((cam.get("roll") or 0) - view["roll"]) < 0.01
     # A page without the token (no cookie, no header) gets nothing.
     ctx = browser.new_context()
     other = ctx.new_page()
@@ -420,6 +428,37 @@ def test_camera_drag_wheel_and_controls(page, web_server):
     page.click("#reset-camera")
     cam3 = page.evaluate("window.intuitfDebug.state.camera")
     assert cam3["zoom"] == 1 and cam3["pan"] == [0, 0]
+
+
+def test_the_view_keeps_the_judging_cameras_roll_and_drags_by_what_is_on_screen(page, web_server):
+    """A judging camera that turns the picture (roll, to show the object upright) is the
+    view's camera too, and a sideways drag turns the object about the picture's vertical."""
+    cam = {"azimuth": 30.0, "elevation": 10.0, "roll": 90.0}
+    run = web_server.start_run("white bone", camera=cam)
+    web_server.wait_run(run)
+    page.reload()
+    page.wait_for_selector("body.ready")
+    show_run(page, run)
+    page.wait_for_function("() => window.intuitfDebug.state.camera.roll === 90")
+    seen = page.evaluate("window.intuitfDebug.state.camera")
+    assert seen["azimuth"] == 30.0 and seen["elevation"] == 10.0
+    # The view settles on the judging picture: the server's camera, roll included.
+    page.wait_for_function(
+        "() => { const v = window.intuitfDebug.state.viewSettled;"
+        " return v && v.camera.roll === 90 && v.camera.azimuth === 30; }"
+    )
+    n = wait_full_frame(page)
+    box = page.locator("#view-canvas").bounding_box()
+    cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    page.mouse.move(cx, cy)
+    page.mouse.down()
+    page.mouse.move(cx + 60, cy, steps=6)
+    page.mouse.up()
+    wait_full_frame(page, n)
+    after = page.evaluate("window.intuitfDebug.state.camera")
+    # Rolled a quarter turn, the picture's horizontal is the camera's vertical: the drag tilts.
+    assert abs(after["elevation"] - 10.0) > 10 and abs(after["azimuth"] - 30.0) < 1
+    assert after["roll"] == 90.0
 
 
 def test_hand_edit_becomes_a_history_point(page, web_server, shots):

@@ -45,5 +45,5 @@ def test_the_three_case_studies(tmp_path):
     assert seen["sketch_intent"] == "sketch"
     assert seen["reference_intent"] == "image"
     for name in ("1-bonsai-preview", "1-bonsai-refined", "2-tooth-from-sketch",
-                 "3-foot-from-reference"):  # fmt: skip
+                 "3-head-from-foot-reference"):  # fmt: skip
         assert (out / f"{name}.png").stat().st_size > 10_000

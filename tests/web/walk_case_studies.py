@@ -4,9 +4,15 @@ screenshots to look at (run by tests/web/test_walk_case_studies.py, or by hand):
     python tests/web/walk_case_studies.py OUT_DIR
 
 1. Bonsai (text, then refine): the volume previewed on its own, its first stage with no
-   words, a query in words, a click on the pot and "make it transparent" for only that.
-2. Tooth (sketch): a result of the tooth, strokes drawn over it, a run from the sketch.
-3. Foot (reference picture): a picture of what is wanted, a run from it.
+   words, the paper's words ("A potted tree with brown pot, silver branch and golden
+   leaves"), a click on the pot and "make it transparent" for only that.
+2. Tooth (sketch): a result of the tooth, the paper's strokes drawn over it (red on the
+   crown top, yellow on the crown middle, blue on the root), a run from the sketch alone.
+3. Foot as reference (picture): the foot with "opaque ivory bone and faint red skin", its
+   best picture given as the reference for a head CT, a run from that picture alone.
+
+``INTUITF_WALK_FULL=1`` runs each search at the size of the paper's examples (population 16,
+6 generations, 128² pictures) for screenshots worth looking at; the test runs them small.
 
 Along the way it checks what a person would notice: the volume choice holds, no request of
 the page fails with 404, pending pictures look pending, Undo is disabled with nothing to undo,
@@ -16,7 +22,6 @@ Real volumes come from ../shared/data/volumes, downsampled (--max-dim) to keep r
 
 from __future__ import annotations
 
-import io
 import os
 import re
 import signal
@@ -33,8 +38,13 @@ DATA = Path(
     or Path(__file__).resolve().parents[3] / "shared" / "data" / "volumes"
 )
 CASES = ("bonsai_256x256x256_uint8.raw.gz", "tooth_103x94x161_uint8.raw.gz",
-         "foot_zfp8lossy_256x256x256_uint8.raw.gz")  # fmt: skip
-SMALL = {"population": "6", "generations": "2", "image_size": "64"}
+         "foot_zfp8lossy_256x256x256_uint8.raw.gz",
+         "ctheadstanford_256x256x113_uint16.raw.gz")  # fmt: skip
+SMALL = (
+    {"population": "16", "generations": "6", "image_size": "128"}
+    if os.environ.get("INTUITF_WALK_FULL")
+    else {"population": "6", "generations": "2", "image_size": "64"}
+)
 
 
 def have_data() -> bool:
@@ -98,6 +108,12 @@ class Server:
         with urllib.request.urlopen(req, timeout=60) as resp:
             raw = resp.read()
             return json.loads(raw) if raw else None
+
+    def get_bytes(self, path: str) -> bytes:
+        req = urllib.request.Request(self.base + path)
+        req.add_header("Authorization", f"token {self.token}")
+        with urllib.request.urlopen(req, timeout=120) as resp:
+            return bytes(resp.read())
 
     def wait_run(self, name: str, timeout: float = 300.0) -> dict:
         deadline = time.monotonic() + timeout
@@ -207,23 +223,6 @@ def pick_something(page, spots) -> int:
     raise AssertionError("nothing to pick where the walk clicked")
 
 
-def reference_png() -> bytes:
-    """A picture of what the foot study wants: ivory bones on black, faint skin around."""
-    import numpy as np
-    from PIL import Image
-
-    y, x = np.mgrid[:128, :128]
-    img = np.zeros((128, 128, 3), np.uint8)
-    skin = (x - 64) ** 2 / 50**2 + (y - 64) ** 2 / 30**2 < 1
-    img[skin] = (90, 40, 30)
-    for cx in (40, 60, 80):
-        bone = (x - cx) ** 2 / 6**2 + (y - 64) ** 2 / 24**2 < 1
-        img[bone] = (235, 225, 200)
-    buf = io.BytesIO()
-    Image.fromarray(img).save(buf, format="PNG")
-    return buf.getvalue()
-
-
 def walk(browser, server: Server, out: Path) -> dict:
     """The three case studies; returns what was seen (for the test to check)."""
     out.mkdir(parents=True, exist_ok=True)
@@ -261,7 +260,7 @@ def walk(browser, server: Server, out: Path) -> dict:
     settle_view(page)
     shot(page, out, "1-bonsai-first-stage")
     choose_volume(page, "bonsai")
-    page.fill("#q-text", "green leaves, a brown trunk, a grey pot")
+    page.fill("#q-text", "A potted tree with brown pot, silver branch and golden leaves")
     small_settings(page)
     text_run = start_and_wait(page, server, first)
     seen["volume_held"] = server.api("GET", f"/api/runs/{text_run}")["volume_id"] == bonsai
@@ -305,8 +304,10 @@ def walk(browser, server: Server, out: Path) -> dict:
     page.click("#sketch-draw")
     settle_view(page)
     box = page.locator("#sketch-canvas").bounding_box()
-    for color, pts in (("#f0f0e0", [(0.45, 0.25), (0.5, 0.2), (0.55, 0.25)]),
-                       ("#d08040", [(0.47, 0.6), (0.5, 0.75), (0.53, 0.6)])):  # fmt: skip
+    # Across the tooth as the view shows it: the crown's top, its middle, the root.
+    for color, pts in (("#dc1e1e", [(0.44, 0.27), (0.5, 0.27), (0.56, 0.27)]),
+                       ("#f0dc28", [(0.44, 0.36), (0.5, 0.36), (0.56, 0.36)]),
+                       ("#2850dc", [(0.46, 0.6), (0.5, 0.6), (0.54, 0.6)])):  # fmt: skip
         page.fill("#sketch-color", color)
         page.mouse.move(box["x"] + pts[0][0] * box["width"], box["y"] + pts[0][1] * box["height"])
         page.mouse.down()
@@ -314,26 +315,35 @@ def walk(browser, server: Server, out: Path) -> dict:
             page.mouse.move(box["x"] + x * box["width"], box["y"] + y * box["height"], steps=4)
         page.mouse.up()
     shot(page, out, "2-tooth-sketch")
-    page.fill("#q-text", "white crown, orange root")
+    page.fill("#q-text", "")
     sketch_run = start_and_wait(page, server, tooth)
     seen["sketch_intent"] = server.api("GET", f"/api/runs/{sketch_run}")["info"]["intent"]["kind"]
     settle_view(page)
     shot(page, out, "2-tooth-from-sketch")
 
-    # 3. Foot: a reference picture.
+    # 3. The foot as a radiologist sets it up, then its picture as the reference for a head.
     choose_volume(page, "foot")
     settle_view(page)
-    page.click("#query .seg-kind button[data-kind=image]")
-    ref = out / "3-foot-reference-input.png"
-    ref.write_bytes(reference_png())
-    page.set_input_files("#q-ref", str(ref))
-    page.wait_for_selector("#q-ref-preview img")
-    page.fill("#q-text", "bones like the picture")
+    page.click("#query .seg-kind button[data-kind=text]")
+    page.fill("#q-text", "opaque ivory bone and faint red skin")
     small_settings(page)
     foot = start_and_wait(page, server, sketch_run)
-    seen["reference_intent"] = server.api("GET", f"/api/runs/{foot}")["info"]["intent"]["kind"]
     settle_view(page)
-    shot(page, out, "3-foot-from-reference")
+    shot(page, out, "3-foot")
+    qid = page.get_attribute(f"#gallery-grid .card[data-qid^='{foot}/']", "data-qid")
+    ref = out / "3-foot-reference-input.png"
+    ref.write_bytes(server.get_bytes(f"/api/candidates/{qid}/image?size=256"))
+    choose_volume(page, "ctheadstanford")
+    settle_view(page)
+    page.click("#query .seg-kind button[data-kind=image]")
+    page.set_input_files("#q-ref", str(ref))
+    page.wait_for_selector("#q-ref-preview img")
+    page.fill("#q-text", "")
+    small_settings(page)
+    head = start_and_wait(page, server, foot)
+    seen["reference_intent"] = server.api("GET", f"/api/runs/{head}")["info"]["intent"]["kind"]
+    settle_view(page)
+    shot(page, out, "3-head-from-foot-reference")
     page.wait_for_timeout(1000)
     ctx.close()
     return seen

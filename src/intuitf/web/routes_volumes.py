@@ -158,6 +158,16 @@ async def structures(request: Request, volume_id: str) -> list[dict]:
     return await asyncio.to_thread(web.catalog.structures, entry.id)
 
 
+@router.get("/volumes/{volume_id}/camera")
+async def volume_camera(request: Request, volume_id: str) -> dict[str, Any]:
+    """``{camera}``: the view a new run of the volume judges from when nothing chooses one
+    (upright, showing its structures), the same as every front end's; the page previews the
+    volume from it."""
+    web = state(request)
+    entry = web.catalog.get(volume_id)  # 404 before any work
+    return {"camera": await asyncio.to_thread(web.catalog.camera, entry.id)}
+
+
 @router.get("/volumes/{volume_id}/histogram", response_model=Histogram)
 async def histogram(request: Request, volume_id: str) -> dict:
     web = state(request)

@@ -105,6 +105,7 @@ class VolumeCatalog:
         self._load_locks: dict[str, threading.Lock] = {}
         self._histograms: dict[str, dict] = {}
         self._structures: dict[str, list[dict]] = {}
+        self._cameras: dict[str, dict] = {}
         self._add(
             VolumeEntry(
                 "phantom", "phantom", "builtin:phantom", "builtin", {}, [96, 96, 96], "uint8"
@@ -284,6 +285,21 @@ class VolumeCatalog:
         with self._lock:
             self._structures[volume_id] = out
         return out
+
+    def camera(self, volume_id: str) -> dict:
+        """The camera a new run of this volume judges from when nothing chooses one (the view
+        that shows the object upright, :func:`intuitf.session.building.default_camera`): the
+        page previews the volume from it (kept per volume; blocking)."""
+        with self._lock:
+            got = self._cameras.get(volume_id)
+        if got is not None:
+            return got
+        from intuitf.session.building import default_camera
+
+        cam = default_camera(self.load(volume_id))
+        with self._lock:
+            self._cameras[volume_id] = cam
+        return cam
 
     # -- uploads --------------------------------------------------------------------------
     def delete_upload(self, volume_id: str, used_by: list[str]) -> None:

@@ -77,12 +77,18 @@ export function generationOf(id) {
 
 /** The camera as the API wants it (only the fields Camera.from_dict knows). */
 export function cameraJSON(cam = state.camera) {
-  return {
+  const out = {
     azimuth: round(cam.azimuth, 2),
     elevation: round(cam.elevation, 2),
     zoom: round(cam.zoom, 4),
     pan: [round(cam.pan[0], 4), round(cam.pan[1], 4)],
   };
+  // A judging camera chosen to show the object upright turns the picture (roll); the view and
+  // every picture asked of the server keep it, or the bonsai lies on its side.
+  if (cam.roll) out.roll = round(cam.roll, 2);
+  if (cam.fov && cam.fov !== 30) out.fov = round(cam.fov, 2);
+  if (cam.projection === "orthographic") out.projection = "orthographic";
+  return out;
 }
 
 /** "#rrggbb" → [r, g, b] in 0..1. */

@@ -103,6 +103,7 @@ export function initVolumeView() {
   // A chosen volume starts loading into the page at once, beside its histogram.
   on("volumeId", () => {
     if (!state.run && state.volumeId) glv.ensureVolume(state.volumeId);
+    if (!state.run && state.volumeId) previewCamera(state.volumeId);
   });
   on(["pick", "selected", "camera"], drawOverlay);
   on(["current", "draft", "run", "volumeId", "histogram"], updateTitle);
@@ -116,22 +117,48 @@ export function initVolumeView() {
 }
 
 function normCamera(c) {
-  return {
+  const out = {
     azimuth: c.azimuth || 0,
     elevation: c.elevation || 0,
     zoom: c.zoom || 1,
     pan: Array.isArray(c.pan) ? [c.pan[0] || 0, c.pan[1] || 0] : [0, 0],
   };
+  if (c.roll) out.roll = c.roll;
+  if (c.fov) out.fov = c.fov;
+  if (c.projection) out.projection = c.projection;
+  return out;
 }
 
 function sameCamera(a, b) {
   return JSON.stringify(cameraJSON(a)) === JSON.stringify(cameraJSON(b));
 }
 
-/** The judging camera of the current run (where the sketch is drawn), or the default. */
+/** The view a volume is previewed from before any run: the one its runs would judge from. */
+let volumeView = { volume: null, camera: null };
+
+async function previewCamera(id) {
+  if (volumeView.volume !== id) {
+    volumeView = { volume: id, camera: null };
+    try {
+      const got = await api.get(`/api/volumes/${api.enc(id)}/camera`);
+      if (volumeView.volume === id) volumeView.camera = normCamera(got.camera);
+    } catch {
+      return; // the default view then: the preview still shows the volume
+    }
+  }
+  const cam = volumeView.camera;
+  if (cam && !state.run && state.volumeId === id && !state.cameraTouched && !sameCamera(cam, state.camera)) {
+    set({ camera: cam });
+  }
+}
+
+/** The judging camera of the current run (where the sketch is drawn), else the view the
+ * volume on preview is shown from, else the default. */
 export function judgingCamera() {
   const cam = state.runDetail && state.runDetail.camera;
-  return cam ? normCamera(cam) : { ...DEFAULT_CAMERA, pan: [0, 0] };
+  if (cam) return normCamera(cam);
+  if (!state.run && volumeView.camera && volumeView.volume === state.volumeId) return { ...volumeView.camera };
+  return { ...DEFAULT_CAMERA, pan: [0, 0] };
 }
 
 export function resetCamera() {
@@ -357,10 +384,15 @@ function onMove(e) {
   if (drag.pan) {
     state.camera = { ...c, pan: [c.pan[0] + dx / r.width, c.pan[1] - dy / r.height] };
   } else {
+    // The drag as seen in the camera before its roll: sideways turns about the picture's
+    // vertical, up and down tilts, whatever way the judging camera turned the picture.
+    const roll = ((c.roll || 0) * Math.PI) / 180;
+    const sx = dx * Math.cos(roll) + dy * Math.sin(roll);
+    const sy = dy * Math.cos(roll) - dx * Math.sin(roll);
     state.camera = {
       ...c,
-      azimuth: (((c.azimuth - (dx * 180) / r.width) % 360) + 360) % 360,
-      elevation: Math.max(-89, Math.min(89, c.elevation + (dy * 180) / r.height)),
+      azimuth: (((c.azimuth - (sx * 180) / r.width) % 360) + 360) % 360,
+      elevation: Math.max(-89, Math.min(89, c.elevation + (sy * 180) / r.height)),
     };
   }
   state.cameraTouched = true;
