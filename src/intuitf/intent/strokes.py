@@ -6,8 +6,10 @@ each of its pixels into the volume, and where the ray enters the object (the fir
 the background's values) the densest value within a short depth is taken: the material the
 surface there belongs to (the partial-volume values in front of it are its rim, not another
 material). A stroke's values give a hint like a word would: a Gaussian at the stroke's typical
-surface value, in the stroke's colour. Strokes whose values overlap are pulled apart at the
-midpoint between their medians (one 1-D transfer function colours values, not places).
+surface value, in the stroke's colour. Two strokes on one material: the one that sees another
+material right behind a thin surface means that one (see :func:`stroke_hints`). Strokes whose
+values still overlap are pulled apart at the midpoint between their medians (one 1-D transfer
+function colours values, not places).
 
 Pure computation on the volume's array and the camera's geometry (no renderer, no I/O).
 """
@@ -51,7 +53,7 @@ class StrokeHint:
     hit_share: float  # of its pixels whose ray met the object
     #: Gaussian heights: visible by default; translucent for a material another stroke looks
     #: through where it is thin (see :func:`stroke_hints`).
-    height: tuple[float, float] = (0.05, 0.8)
+    height: tuple[float, float] = VISIBLE
 
     def to_explorer(self) -> dict:
         return {
@@ -193,8 +195,8 @@ def stroke_hints(
     ``BEHIND_SHARE`` of its pixels (the dentin under the enamel's thin edge) is taken to mean
     that material ("red crown, yellow dentin", as the paper reads that sketch); the other
     keeps the surface, translucent (``SEE_THROUGH``): opaque where it is thick, seen through
-    where it is thin, so that both colours show where they were drawn. Strokes whose values still overlap are pulled apart at the midpoint
-    between their medians.
+    where it is thin, so that both colours show where they were drawn. Strokes whose values
+    still overlap are pulled apart at the midpoint between their medians.
     """
     sk = np.asarray(sketch)
     height, width = sk.shape[:2]
