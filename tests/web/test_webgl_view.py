@@ -74,6 +74,13 @@ def test_the_page_renders_drags_picks_and_draws_the_features(chromium, server):
         # A drag turns the camera with frames drawn by the page; the release brings a full one.
         box = page.locator("#view-canvas").bounding_box()
         cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+        # The preview's view is the volume's own (asked of the server): wait for it, then drag.
+        view = page.evaluate("() => fetch('/api/volumes/phantom/camera').then(r => r.json())")
+        page.wait_for_function(
+            "a => Math.abs(window.intuitfDebug.state.camera.azimuth - a) < 0.01",
+            arg=view["camera"]["azimuth"],
+        )
+        before = page.evaluate("window.intuitfDebug.state.camera.azimuth")
         page.mouse.move(cx, cy)
         page.mouse.down()
         for k in range(1, 8):
@@ -82,7 +89,7 @@ def test_the_page_renders_drags_picks_and_draws_the_features(chromium, server):
         wait_page_frame(page, "drag", n)
         page.mouse.up()
         n = wait_page_frame(page, "full", n)
-        assert abs(page.evaluate("window.intuitfDebug.state.camera.azimuth")) > 5
+        assert abs(page.evaluate("window.intuitfDebug.state.camera.azimuth") - before) > 5
         # The features strip is drawn by the page (pictures made here, not fetched).
         page.wait_for_selector("#features-strip .feature img")
         srcs = page.eval_on_selector_all(
