@@ -106,6 +106,9 @@ class VolumeCatalog:
         self._histograms: dict[str, dict] = {}
         self._structures: dict[str, list[dict]] = {}
         self._cameras: dict[str, dict] = {}
+        # One structure map built at a time per volume: the Features labels and the preview's
+        # view both ask for it when a volume is chosen, and two builds would share two cores.
+        self._map_locks: dict[str, threading.Lock] = {}
         self._add(
             VolumeEntry(
                 "phantom", "phantom", "builtin:phantom", "builtin", {}, [96, 96, 96], "uint8"
@@ -275,7 +278,8 @@ class VolumeCatalog:
         from intuitf.intent.hints import structure_map_of
 
         # The map runs of this volume use (named by a model where one named its parts).
-        smap = structure_map_of(self.load(volume_id))
+        with self._map_lock(volume_id):
+            smap = structure_map_of(self.load(volume_id))
         out = [
             {"id": s.id, "name": s.name, "shape": s.shape, "position": s.position,
              "outer": s.outer, "share": float(s.share),
@@ -296,10 +300,15 @@ class VolumeCatalog:
             return got
         from intuitf.session.building import default_camera
 
-        cam = default_camera(self.load(volume_id))
+        with self._map_lock(volume_id):
+            cam = default_camera(self.load(volume_id))
         with self._lock:
             self._cameras[volume_id] = cam
         return cam
+
+    def _map_lock(self, volume_id: str) -> threading.Lock:
+        with self._lock:
+            return self._map_locks.setdefault(volume_id, threading.Lock())
 
     # -- uploads --------------------------------------------------------------------------
     def delete_upload(self, volume_id: str, used_by: list[str]) -> None:
