@@ -281,9 +281,10 @@ def label_tf_bound(scene: Scene, asked: dict[str, tuple]) -> dict:
     """What a 1-D TF made from the labels reaches: each named structure one Gaussian in its
     asked colour at the median of its core's values (spread from their interquartile range,
     height by its look), over a small grid of height and width scales; of the TFs whose
-    opacities agree with the words (any, if none does), the one with the least mean ΔE. Where structures share values no 1-D TF separates them, so this
-    shows which targets a value-based TF cannot meet (an estimate, not a proof: the search
-    can find better narrow TFs than this grid)."""
+    opacities agree with the words (any, if none does), the one with the least mean ΔE.
+    Where structures share values no 1-D TF separates them, so this shows which targets a
+    value-based TF cannot meet (an estimate, not a proof: the search can find better narrow
+    TFs than this grid)."""
     from skimage.color import lab2rgb
 
     from intuitf.tf import Gaussian, GaussianTF
