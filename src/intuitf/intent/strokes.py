@@ -103,20 +103,6 @@ def _rays(camera: Camera, extent, width: int, height: int, rows: np.ndarray, col
     return o, d
 
 
-def surface_values(
-    data: np.ndarray,
-    spacing: tuple[float, float, float],
-    camera: Camera,
-    size: tuple[int, int],
-    rows: np.ndarray,
-    cols: np.ndarray,
-    threshold: float,
-) -> np.ndarray:
-    """Per pixel (row, col) of a picture of ``size`` (width, height): the densest value within
-    ``SURFACE_DEPTH`` voxels behind where its ray first exceeds ``threshold`` (NaN: no hit)."""
-    return layer_values(data, spacing, camera, size, rows, cols, threshold)[0]
-
-
 def layer_values(
     data: np.ndarray,
     spacing: tuple[float, float, float],
@@ -126,10 +112,12 @@ def layer_values(
     cols: np.ndarray,
     threshold: float,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per pixel: the surface value (as :func:`surface_values`) and the value of the material
-    right behind that surface: the median, within ``BEHIND_DEPTH`` voxels after the surface
-    layer, of the object's values at least ``OTHER_MATERIAL`` from the surface value (NaN:
-    no hit, or the surface material goes on that deep)."""
+    """Per pixel (row, col) of a picture of ``size`` (width, height): the surface value, the
+    densest value within ``SURFACE_DEPTH`` voxels behind where its ray first exceeds
+    ``threshold``; and the value of the material right behind that surface, the median,
+    within ``BEHIND_DEPTH`` voxels after the surface layer, of the object's values at least
+    ``OTHER_MATERIAL`` from the surface value. NaN: no hit (both), or the surface material
+    goes on that deep (the second)."""
     sp = np.asarray(spacing, dtype=np.float64)
     shape_xyz = np.asarray(data.shape[::-1], dtype=np.float64)
     extent = (shape_xyz - 1.0) * sp

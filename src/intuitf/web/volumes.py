@@ -12,6 +12,7 @@ import os
 import re
 import threading
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -245,66 +246,69 @@ class VolumeCatalog:
                         entry.dtype = str(vol.original_dtype)
         return vol
 
-    def histogram(self, volume_id: str) -> dict:
-        """``{counts (log-scaled, max 1), value_range, materials}`` (blocking)."""
+    def _kept(self, store: dict, volume_id: str, build: Callable[[], Any]) -> Any:
+        """``store[volume_id]``, built by ``build()`` (outside the lock) the first time."""
         with self._lock:
-            got = self._histograms.get(volume_id)
+            got = store.get(volume_id)
         if got is not None:
             return got
-        from intuitf.tf.defaults import find_materials
-
-        vol = self.load(volume_id)
-        counts, _ = vol.histogram(256)
-        logc = np.log1p(counts.astype(np.float64))
-        top = float(logc.max()) or 1.0
-        out = {
-            "counts": [round(float(v) / top, 5) for v in logc],
-            "value_range": [float(v) for v in vol.value_range],
-            "materials": [
-                {"mean": float(m.center), "width": float(m.spread), "fraction": float(m.fraction)}
-                for m in find_materials(counts)
-            ],
-        }
+        out = build()
         with self._lock:
-            self._histograms[volume_id] = out
+            store[volume_id] = out
         return out
+
+    def histogram(self, volume_id: str) -> dict:
+        """``{counts (log-scaled, max 1), value_range, materials}`` (blocking)."""
+
+        def build() -> dict:
+            from intuitf.tf.defaults import find_materials
+
+            vol = self.load(volume_id)
+            counts, _ = vol.histogram(256)
+            logc = np.log1p(counts.astype(np.float64))
+            top = float(logc.max()) or 1.0
+            return {
+                "counts": [round(float(v) / top, 5) for v in logc],
+                "value_range": [float(v) for v in vol.value_range],
+                "materials": [
+                    {"mean": float(m.center), "width": float(m.spread),
+                     "fraction": float(m.fraction)}
+                    for m in find_materials(counts)
+                ],
+            }  # fmt: skip
+
+        return self._kept(self._histograms, volume_id, build)
 
     def structures(self, volume_id: str) -> list[dict]:
         """The foreground structures of a volume (kept per volume; blocking)."""
-        with self._lock:
-            got = self._structures.get(volume_id)
-        if got is not None:
-            return got
-        from intuitf.intent.hints import structure_map_of
 
-        # The map runs of this volume use (named by a model where one named its parts).
-        with self._map_lock(volume_id):
-            smap = structure_map_of(self.load(volume_id))
-        out = [
-            {"id": s.id, "name": s.name, "shape": s.shape, "position": s.position,
-             "outer": s.outer, "share": float(s.share),
-             "value_range": [float(s.value_range[0]), float(s.value_range[1])]}
-            for s in smap.foreground()
-        ]  # fmt: skip
-        with self._lock:
-            self._structures[volume_id] = out
-        return out
+        def build() -> list[dict]:
+            from intuitf.intent.hints import structure_map_of
+
+            # The map runs of this volume use (named by a model where one named its parts).
+            with self._map_lock(volume_id):
+                smap = structure_map_of(self.load(volume_id))
+            return [
+                {"id": s.id, "name": s.name, "shape": s.shape, "position": s.position,
+                 "outer": s.outer, "share": float(s.share),
+                 "value_range": [float(s.value_range[0]), float(s.value_range[1])]}
+                for s in smap.foreground()
+            ]  # fmt: skip
+
+        return self._kept(self._structures, volume_id, build)
 
     def camera(self, volume_id: str) -> dict:
         """The camera a new run of this volume judges from when nothing chooses one (the view
         that shows the object upright, :func:`intuitf.session.building.default_camera`): the
         page previews the volume from it (kept per volume; blocking)."""
-        with self._lock:
-            got = self._cameras.get(volume_id)
-        if got is not None:
-            return got
-        from intuitf.session.building import default_camera
 
-        with self._map_lock(volume_id):
-            cam = default_camera(self.load(volume_id))
-        with self._lock:
-            self._cameras[volume_id] = cam
-        return cam
+        def build() -> dict:
+            from intuitf.session.building import default_camera
+
+            with self._map_lock(volume_id):
+                return default_camera(self.load(volume_id))
+
+        return self._kept(self._cameras, volume_id, build)
 
     def _map_lock(self, volume_id: str) -> threading.Lock:
         with self._lock:
