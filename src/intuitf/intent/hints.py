@@ -741,8 +741,9 @@ def explorer_hints(
     out = [h.to_explorer() for h in th.hints if h.center is not None or intent.kind == "edit"]
     placed = [h for h in th.hints if h.center is not None]
     if intent.kind == "sketch" and intent.sketch is not None and volume is not None and camera:
-        out += [h.to_explorer() for h in _stroke_hints(intent, volume, camera)]
-        placed = placed + [_with_place(h) for h in _stroke_hints(intent, volume, camera)]
+        strokes = _stroke_hints(intent, volume, camera)  # rays through every stroke: once
+        out += [h.to_explorer() for h in strokes]
+        placed = placed + [_with_place(h) for h in strokes]
     if intent.kind != "edit" and volume is not None and not any(h.role == "air" for h in placed):
         counts, _ = volume.histogram()
         layout = _Layout.of(np.asarray(counts, dtype=np.float64), _materials(counts))
