@@ -674,8 +674,9 @@ def _reference_hints(image) -> tuple[TextHints, dict[str, tuple]]:
     layers = reference_layers(image)
     if not layers:
         return parse_text(None), {}
-    parsed = parse_text(reference_words(layers))
-    parsed.notes.append("from the reference picture: " + reference_words(layers))
+    words = reference_words(layers)
+    parsed = parse_text(words)
+    parsed.notes.append("from the reference picture: " + words)
     exact = {f"{kind} part": rgb for kind, rgb, _ in layers}
     return parsed, exact
 
