@@ -1,3 +1,3 @@
-from intuitf.cli.app import main
+from intuitf.cli.app import console_main
 
-main()
+console_main()

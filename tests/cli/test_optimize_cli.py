@@ -139,6 +139,10 @@ def test_killed_run_resumes_with_nothing_repeated(tmp_path):
 
 
 def test_ctrl_c_saves_and_says_how_to_resume(tmp_path):
+    # Far more generations than the test waits for, so the run is surely still going when
+    # Ctrl-C arrives (with COMMON's four it sometimes finished first on a busy machine).
+    long_run = [*COMMON]
+    long_run[long_run.index("--generations") + 1] = "60"
     with FakeMLLMServer(target=red_disc(), latency=0.05) as srv:
         run = tmp_path / "run"
         proc = subprocess.Popen(
@@ -148,7 +152,7 @@ def test_ctrl_c_saves_and_says_how_to_resume(tmp_path):
                 "intuitf",
                 "optimize",
                 "phantom",
-                *COMMON,
+                *long_run,
                 "--evaluator",
                 srv.base_url,
                 "-o",

@@ -15,8 +15,8 @@ import intuitf.cli.app as cli_app
 
 
 def _intuitf(*args, timeout=240):
-    """The real entry point (the console script's ``main``) in a fresh process."""
-    code = "import sys; from intuitf.cli.app import main; sys.argv[0] = 'intuitf'; main()"
+    """The real entry point (the console script's ``console_main``) in a fresh process."""
+    code = "import sys; from intuitf.cli.app import console_main; sys.argv[0] = 'intuitf'; console_main()"
     return subprocess.run(
         [sys.executable, "-c", code, *args],
         capture_output=True,
@@ -155,3 +155,17 @@ def test_version_prints_the_version_and_exits_0():
     proc = _intuitf("--version")
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip() == f"intuitf {__version__}"
+
+
+def test_a_ctrl_c_after_the_command_ends_the_process_quietly():
+    """After the command, SIGINT is back to the default action: a key pressed while the
+    interpreter shuts down (joining worker threads) ends it without a traceback."""
+    code = (
+        "import signal, sys; from intuitf.cli.app import console_main\n"
+        "sys.argv[:] = ['intuitf', '--version']\n"
+        "try:\n    console_main()\nexcept SystemExit:\n    pass\n"
+        "print(signal.getsignal(signal.SIGINT) is signal.SIG_DFL)"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip().splitlines()[-1] == "True"

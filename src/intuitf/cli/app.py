@@ -6,7 +6,9 @@ Errors a user can cause are printed as one clear message, never as a traceback.
 from __future__ import annotations
 
 import importlib
+import signal
 import sys
+import threading
 
 import typer
 from rich.console import Console
@@ -115,3 +117,17 @@ def main(argv: list[str] | None = None) -> None:
             err_console.print("[yellow]Aborted.[/]")
             sys.exit(130)
         raise
+
+
+def console_main() -> None:
+    """The process entry point (``intuitf`` and ``python -m intuitf``): :func:`main`, and then
+    a Ctrl-C that arrives after the command is over ends the process silently.
+
+    Everything is saved by then; the interpreter's shutdown (joining worker threads) would
+    otherwise print a KeyboardInterrupt traceback for a key pressed a moment too late.
+    """
+    try:
+        main()
+    finally:
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGINT, signal.SIG_DFL)
