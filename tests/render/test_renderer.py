@@ -122,6 +122,32 @@ def test_cache_matches_direct_renderer_within_quantisation(tooth, foot):
                     assert d.max() > 0  # the two paths are really different code
 
 
+def test_empty_space_skipping_changes_no_pixel(foot):
+    """The renderer's two skipping grids (8³ blocks jumped over, 2³ blocks passed over) give
+    exactly the picture of marching every sample, and do skip: most of the foot's blocks are
+    invisible to a TF of its bone alone."""
+    from intuitf.render import kernels
+    from intuitf.render.context import BLOCK_SIZE, FINE_BLOCK_SIZE
+    from intuitf.render.renderer import EARLY_STOP
+
+    bone = GaussianTF((Gaussian(mean=0.6, width=0.05, height=0.4, color=(1.0, 0.9, 0.8)),))
+    for shading in (False, True):
+        r = VolumeRenderer(foot, size=96, shading=shading)
+        for cam in (Camera(azimuth=35, elevation=25), Camera(azimuth=90, elevation=-60, roll=20)):
+            lut = r.lut(bone)
+            coarse = r._visible_blocks(lut, BLOCK_SIZE)
+            fine = r._visible_blocks(lut, FINE_BLOCK_SIZE)
+            assert coarse.mean() < 0.6 and fine.mean() < coarse.mean()
+            every = np.empty((96 * 96, 4), dtype=np.float32)
+            kernels.march(foot.data, r._shading_grad(), shading, np.ones_like(coarse),
+                          BLOCK_SIZE, np.ones_like(fine), 1, lut, False,
+                          r.frame(cam).packed(), r._spacing, r.sample_distance,
+                          r.shade_params, EARLY_STOP, every)  # fmt: skip
+            skipped = r.render_rgba(bone, cam)
+            assert skipped[..., 3].max() > 0.5  # the bone shows
+            np.testing.assert_array_equal(skipped.reshape(-1, 4), every)
+
+
 def test_cache_stores_uint16_samples_for_wide_luts():
     a = (np.random.default_rng(0).random((24, 24, 24)) * 3000).astype(np.uint16)
     vol = Volume.from_array(a, value_range=(0, 2999))

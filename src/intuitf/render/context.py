@@ -30,10 +30,14 @@ from intuitf.render import kernels
 from intuitf.render.device import select_device
 from intuitf.volume.volume import Volume
 
-__all__ = ["BLOCK_SIZE", "RenderContext", "render_context"]
+__all__ = ["BLOCK_SIZE", "FINE_BLOCK_SIZE", "RenderContext", "render_context"]
 
-#: Block edge (cells) of the empty-space-skipping grid of the direct renderer.
+#: Block edge (cells) of the empty-space-skipping grid of the direct renderer: rays jump over
+#: blocks that no sample of the TF can see.
 BLOCK_SIZE = 8
+#: Block edge (cells) of the direct renderer's fine grid: inside a visible block, a sample whose
+#: fine block no value of the TF can see is passed over without interpolating or classifying.
+FINE_BLOCK_SIZE = 2
 
 
 class RenderContext:
@@ -54,7 +58,7 @@ class RenderContext:
         self._device_named = False
         self._lock = threading.Lock()
         self._grad: np.ndarray | None = None
-        self._blocks: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._blocks: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
         self._gpu: Any = None
 
     @property
@@ -71,20 +75,21 @@ class RenderContext:
                 self._grad = g
             return self._grad
 
-    def block_ranges(self, lut_size: int) -> tuple[np.ndarray, np.ndarray]:
-        """LUT index range (lo, hi) each empty-space block's samples can take (per LUT size)."""
+    def block_ranges(self, lut_size: int, bsize: int = BLOCK_SIZE) -> tuple[np.ndarray, np.ndarray]:
+        """LUT index range (lo, hi) that the samples of each block of ``bsize`` cells can take
+        (uint16; per LUT size and block size)."""
         with self._lock:
-            got = self._blocks.get(lut_size)
+            got = self._blocks.get((lut_size, bsize))
             if got is None:
                 nz, ny, nx = self.shape
-                shape = tuple(max(1, -(-(n - 1) // BLOCK_SIZE)) for n in (nz, ny, nx))
+                shape = tuple(max(1, -(-(n - 1) // bsize)) for n in (nz, ny, nx))
                 bmin = np.empty(shape, dtype=np.float32)
                 bmax = np.empty(shape, dtype=np.float32)
-                kernels.block_minmax(self.data, BLOCK_SIZE, bmin, bmax)
+                kernels.block_minmax(self.data, bsize, bmin, bmax)
                 scale = lut_size - 1
-                lo = np.clip(np.floor(bmin * scale), 0, scale).astype(np.int64)
-                hi = np.clip(np.ceil(bmax * scale), 0, scale).astype(np.int64)
-                got = self._blocks[lut_size] = (lo, hi)
+                lo = np.clip(np.floor(bmin * scale), 0, scale).astype(np.uint16)
+                hi = np.clip(np.ceil(bmax * scale), 0, scale).astype(np.uint16)
+                got = self._blocks[(lut_size, bsize)] = (lo, hi)
             return got
 
     def gpu_volume(self) -> Any:

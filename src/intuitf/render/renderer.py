@@ -11,7 +11,7 @@ import numpy as np
 from intuitf.errors import RenderError
 from intuitf.render import kernels
 from intuitf.render.camera import Camera, ViewFrame
-from intuitf.render.context import BLOCK_SIZE, RenderContext, render_context
+from intuitf.render.context import BLOCK_SIZE, FINE_BLOCK_SIZE, RenderContext, render_context
 from intuitf.render.device import select_device
 from intuitf.tf.gaussian import GaussianTF
 from intuitf.volume.volume import Volume
@@ -163,6 +163,14 @@ class VolumeRenderer:
         """LUT index range (lo, hi) each empty-space block's samples can take."""
         return self.context.block_ranges(self.lut_size)
 
+    def _visible_blocks(self, lut: np.ndarray, bsize: int) -> np.ndarray:
+        """uint8 per block of ``bsize`` cells: 1 where ``lut`` can show one of its samples."""
+        lo, hi = self.context.block_ranges(self.lut_size, bsize)
+        occupied = np.concatenate(([0], np.cumsum(lut[:, 3] > 0))).astype(np.int64)
+        vis = np.empty(lo.shape, dtype=np.uint8)
+        kernels.visible_blocks(lo.ravel(), hi.ravel(), occupied, vis.reshape(-1))
+        return vis
+
     def _cuda_backend(self) -> CudaBackend:
         """The GPU state (device arrays, launch geometry), made on first use."""
         if self._cuda is None:
@@ -206,17 +214,16 @@ class VolumeRenderer:
         if self.device == "cuda":
             frame = self.frame(camera)
             return self._cuda_backend().march(lut[None], frame, nearest=nearest, to8=False)[0]
-        occupied = np.concatenate(([0], np.cumsum(lut[:, 3] > 0)))
-        lo, hi = self._block_ranges()
-        vis = (occupied[hi + 1] > occupied[lo]).astype(np.uint8)
         frame = self.frame(camera)
         out = np.empty((self.width * self.height, 4), dtype=np.float32)
         kernels.march(
             self.volume.data,
             self._shading_grad(),
             self.shading,
-            vis,
+            self._visible_blocks(lut, BLOCK_SIZE),
             BLOCK_SIZE,
+            self._visible_blocks(lut, FINE_BLOCK_SIZE),
+            int(FINE_BLOCK_SIZE).bit_length() - 1,
             lut,
             bool(nearest),
             frame.packed(),
