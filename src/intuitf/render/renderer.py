@@ -71,7 +71,8 @@ class VolumeRenderer:
 
     :meth:`render` ray-marches every sample (trilinear interpolation, post-classification with
     linear LUT interpolation, front-to-back compositing, early ray termination, empty-space
-    skipping over 8³ blocks). :meth:`sample_cache` samples the volume once for a camera so that
+    skipping over 8³ blocks, and inside visible ones samples passed over in 2³ blocks the TF
+    cannot see). :meth:`sample_cache` samples the volume once for a camera so that
     many TFs can be rendered cheaply (see :class:`SampleCache`); :meth:`render_many` renders a
     whole population through one.
 
