@@ -66,6 +66,24 @@ def test_hinted_tf_shows_what_the_words_ask_and_keeps_the_rest_quiet():
     assert min(tf.gaussians, key=lambda g: abs(g.mean - 0.3)).height == 0.0
 
 
+def test_a_hints_colour_is_the_named_colour_not_a_neighbour():
+    """Copies of a hint's colour vary only a little: "orange" stays orange (within ΔE2000 8
+    nine times in ten), where a palette colour's full variation reached gold often."""
+    from skimage.color import deltaE_ciede2000, rgb2lab
+
+    orange = Hint("inner part", center=0.7, spread=0.03, color=(1.0, 140 / 255, 0.0))
+    rng = np.random.default_rng(3)
+    cols = []
+    for _ in range(200):
+        tf = hinted_tf(rng, (orange,), [], 1, Bounds())
+        cols.append(tf.gaussians[0].color)
+    lab = rgb2lab(np.asarray(cols, dtype=np.float64)[None])[0]
+    target = rgb2lab(np.asarray(orange.color, dtype=np.float64)[None, None])[0, 0]
+    de = deltaE_ciede2000(np.broadcast_to(target, lab.shape), lab)
+    assert (de < 8).mean() >= 0.85
+    assert len({tuple(c) for c in cols}) == len(cols)  # still apart: no duplicates
+
+
 def test_first_population_holds_hinted_candidates():
     ex = GeneticExplorer(population=30, n_gaussians=5, seed=1, histogram=_histogram(), hints=HINTS)
     pop = ex.ask()

@@ -145,18 +145,22 @@ class Bounds:
         return hsl_to_rgb(h, s, lum)
 
     def sample_palette_color(
-        self, rng: np.random.Generator, palette: Sequence[Sequence[float]]
+        self,
+        rng: np.random.Generator,
+        palette: Sequence[Sequence[float]],
+        variation: float = 1.0,
     ) -> tuple[float, float, float]:
         """One of ``palette``'s colours, slightly varied (in HSL) and moved into the bounds.
 
-        The variation (hue ±0.02, saturation and lightness ±0.05, one standard deviation)
-        keeps copies of one hint colour apart, so duplicate removal does not reject them.
+        The variation (hue ±0.02, saturation and lightness ±0.05, one standard deviation,
+        times ``variation``) keeps copies of one colour apart, so duplicate removal does not
+        reject them.
         """
         h, s, lum = rgb_to_hsl(palette[int(rng.integers(len(palette)))])
-        h = h + rng.normal(0.0, 0.02)
+        h = h + rng.normal(0.0, 0.02 * variation)
         h = h % 1.0 if self.hue_circular else _clip(h, self.hue)
-        s = _clip(s + rng.normal(0.0, 0.05), self.saturation)
-        lum = _clip(lum + rng.normal(0.0, 0.05), self.lightness)
+        s = _clip(s + rng.normal(0.0, 0.05 * variation), self.saturation)
+        lum = _clip(lum + rng.normal(0.0, 0.05 * variation), self.lightness)
         return self.clip_color(hsl_to_rgb(h, s, lum))
 
     # -- serialisation ---------------------------------------------------------------------

@@ -30,6 +30,11 @@ EDIT_DIRECTIONS = (None, "fainter", "hidden", "stronger", "brighter", "darker")
 FAINTER = (0.05, 0.35)
 STRONGER = (1.5, 4.0)
 
+#: A hint's colour is the colour the words name (orange, not gold): copies of it vary by
+#: this part of a palette colour's variation (hue ±0.008, one standard deviation, where
+#: ±0.02 took "orange" half-way to gold two times in five).
+HINT_COLOR_VARIATION = 0.4
+
 #: A Gaussian belongs to a hint when its mean is within this many of the hint's spreads...
 _REACH = 2.5
 #: ...or within this absolute distance (normalised units), whichever is larger.
@@ -179,7 +184,11 @@ def hinted_tf(
         )
         band = h.height or bounds.height_init
         height = 0.0 if h.hidden else sample_hint_height(rng, band, bounds)
-        rgb = bounds.sample_palette_color(rng, [h.color]) if h.color else color(rng)
+        rgb = (
+            bounds.sample_palette_color(rng, [h.color], HINT_COLOR_VARIATION)
+            if h.color
+            else color(rng)
+        )
         gs.append(Gaussian(mean, width, height, rgb))
     others = [m for m in materials if all(not h.reaches(m.center) for h in avoid)]
     order = list(rng.permutation(len(others))) if others else []
@@ -237,7 +246,7 @@ def edit_step(g: Gaussian, hint: Hint, rng: np.random.Generator, bounds: Bounds)
     h = min(bounds.height[1], max(bounds.height[0], h))
     color = g.color
     if hint.color is not None:
-        color = bounds.sample_palette_color(rng, [hint.color])
+        color = bounds.sample_palette_color(rng, [hint.color], HINT_COLOR_VARIATION)
     elif d in ("brighter", "darker"):
         hue, sat, lum = rgb_to_hsl(g.color)
         step = rng.uniform(0.08, 0.25) * (1.0 if d == "brighter" else -1.0)

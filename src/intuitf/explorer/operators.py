@@ -15,7 +15,14 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from intuitf.explorer.bounds import Bounds, hsl_to_rgb, rgb_to_hsl
-from intuitf.explorer.hints import Hint, edit_hint, edit_step, hint_for, sample_hint_height
+from intuitf.explorer.hints import (
+    HINT_COLOR_VARIATION,
+    Hint,
+    edit_hint,
+    edit_step,
+    hint_for,
+    sample_hint_height,
+)
 from intuitf.tf.gaussian import Gaussian, GaussianTF
 
 #: Gaussian attributes crossover may exchange.
@@ -182,7 +189,8 @@ def mutate(
             gs[i] = replace(gs[i], color=_mutate_color(gs[i].color, rng, p, b, own.get(i)))
     for i, hint in hinted.items():
         if hint.color is not None:
-            gs[i] = replace(gs[i], color=b.sample_palette_color(rng, [hint.color]))
+            rgb = b.sample_palette_color(rng, [hint.color], HINT_COLOR_VARIATION)
+            gs[i] = replace(gs[i], color=rgb)
     return tf.with_gaussians(gs)
 
 
