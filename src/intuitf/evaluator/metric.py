@@ -29,6 +29,10 @@ aspect key                     measure (higher is better unless noted)
                                6 and not at all beyond ΔE 25, saturating at 5 %);
                                "opaque" / "semi-opaque" / "transparent" / "faint" against the
                                mean colour distance of the foreground from the background;
+                               each solid structure the words name, in its own region of
+                               the picture (``Intent.part_regions``, from the structure map),
+                               near its colour once brightened (shading kept out) and as
+                               light on its lit side;
                                "colorful" / "vibrant" against colour variety; "high-contrast"
                                against contrast. A text with none of these that asks for
                                a clear view ("show its structure clearly", "details") is
@@ -359,6 +363,9 @@ class MetricJudge:
             elif _TRANSPARENT_RE.search(text):
                 # Faint but present: no foreground at all is not "transparent", it is empty.
                 parts.append(0.0 if f.coverage < 0.005 else 1.0 - min(1.0, f.opacity / 100.0))
+        # Each structure the words name, in its own region: "golden leaves" and a brown pot
+        # are not met by golden pot and brown leaves, though the colours are all there.
+        parts.extend(_region_colour(f, r) for r in intent.part_regions)
         if _COLOURFUL_RE.search(text):
             parts.append(min(1.0, f.variety / 6.0))
         if _CONTRAST_RE.search(text):
@@ -523,6 +530,45 @@ def _clause_presence(f: _Features, name: str, mod: str | None) -> float:
         toward_bg = np.abs(pix[:, 0] - f.bg_lab[0]) < 0.8 * abs(target[0] - f.bg_lab[0])
         tinted &= ~solid & toward_bg
     return _saturating(tinted.mean(), _CLAUSE_SATURATION * 1.5)
+
+
+#: Below this many pixels, a named structure does not show in its region.
+_REGION_MIN_PIXELS = 12
+
+
+def _region_colour(f: _Features, region) -> float:
+    """How well the picture shows a named structure in its colour where it is (a
+    :class:`~intuitf.evaluator.types.PartRegion`): 0 when nothing shows there, else the mean
+    over the region's foreground pixels of :func:`_nearness` to the asked colour, both
+    brightened to a value (max channel) of 0.95 first.
+
+    Brightened, because the headlight darkens a surface turned away and a faint layer is dark
+    over a black background: what tells a brown pot from a silver one is the colour, not how
+    lit it is (as :meth:`_Features.layers`).
+    """
+    mask = np.asarray(region.mask, dtype=bool)
+    if mask.shape != f.fg.shape:
+        mask = _resize_like(mask.astype(np.float32), f.fg.shape, order=0) > 0.5
+    here = mask & f.fg
+    if f.rgb is None or int(here.sum()) < _REGION_MIN_PIXELS:
+        return 0.0
+    rgb = f.rgb[here].astype(np.float32) / 255.0
+    peak = rgb.max(axis=1, keepdims=True)
+    lit = peak[:, 0] > 0.06  # darker pixels have no colour left to read
+    if not lit.any():
+        return 0.0
+    shown = rgb2lab((rgb[lit] * (0.95 / peak[lit]))[None])[0]
+    asked = np.clip(np.asarray(region.rgb, dtype=np.float32), 0.0, 1.0)
+    asked = asked * (0.95 / max(float(asked.max()), 1e-3))
+    target = rgb2lab(asked[None, None])[0, 0]
+    # Pixels too dark to read count as not showing the colour (a structure in shadow).
+    hue = float(_nearness(shown, target).sum() / here.sum())
+    if region.look in ("faint", "semi"):
+        return hue  # a translucent layer is meant to show dimmer than its colour
+    # Brightening loses lightness: brown is orange in shadow. A solid structure's lit side
+    # shows its own lightness, so the region's bright pixels are compared with the colour's.
+    bright = float(np.percentile(peak[:, 0], 90))
+    return hue * float(np.exp(-abs(bright - float(np.max(region.rgb))) / 0.3))
 
 
 def _saturating(share: float, full: float) -> float:

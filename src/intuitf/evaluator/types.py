@@ -46,6 +46,23 @@ class Aspect:
 IntentKind = Literal["none", "text", "image", "sketch", "edit"]
 
 
+@dataclass(frozen=True, eq=False)
+class PartRegion:
+    """Where a structure the words name shows in the judge's pictures, and its asked colour.
+
+    ``mask`` (bool, the judging pictures' height x width) is the structure's silhouette from
+    the judging camera; ``rgb`` the colour the words give it (in [0, 1]); ``look`` the
+    opacity word ("opaque", "semi", "faint") or None. Made by the session from the volume's
+    structure map (:mod:`intuitf.intent.regions`), so that a judge that cannot tell a pot
+    from leaves by looking can still check each one's colour where it is.
+    """
+
+    name: str
+    rgb: tuple[float, float, float]
+    mask: np.ndarray
+    look: str | None = None
+
+
 @dataclass(eq=False)
 class Intent:
     """What the user wants.
@@ -69,9 +86,14 @@ class Intent:
     selected: tuple[int, ...] = ()
     about: str | None = None
     selection_mask: np.ndarray | None = None
+    part_regions: tuple[PartRegion, ...] = ()
 
     def fingerprint(self) -> str:
-        """A stable hash of the intent's content (for verdict caching)."""
+        """A stable hash of the intent's content (for verdict caching).
+
+        ``part_regions`` are left out: they are worked out from the volume for the offline
+        judge and are not part of what a model is asked.
+        """
         import hashlib
 
         h = hashlib.sha256()

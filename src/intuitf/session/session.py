@@ -327,6 +327,8 @@ class Session:
         )
         self._cache: Any = None
         self._images: dict[str, np.ndarray] = {}
+        #: (intent, camera, the intent the judge is given), for :meth:`_judged_intent`.
+        self._judged: tuple[Any, dict, Intent] | None = None
         self.records: list[GenerationRecord] = []
         self.generation_seconds: list[float] = []
         #: Where the journal, checkpoints and pictures go (a run folder, or memory).
@@ -488,6 +490,20 @@ class Session:
         self.settings.camera = camera.to_dict()
         self._cache = None
         self._images.clear()
+
+    def _judged_intent(self) -> Intent:
+        """The intent as the judge gets it: with the picture regions of the structures its
+        words name (:func:`intuitf.intent.regions.part_regions`), worked out once per intent
+        and judging camera."""
+        cam = self.camera.to_dict()
+        if self._judged is None or self._judged[0] is not self.intent or self._judged[1] != cam:
+            from dataclasses import replace
+
+            from intuitf.intent.regions import part_regions
+
+            regions = part_regions(self.intent, self.volume, self.camera, self.renderer.size)
+            self._judged = (self.intent, cam, replace(self.intent, part_regions=regions))
+        return self._judged[2]
 
     def image(self, candidate_id: str, tf: GaussianTF) -> np.ndarray:
         """The judging rendering of a candidate, rendered once and remembered."""
@@ -837,7 +853,7 @@ class Session:
         tournament = SwissTournament(
             self._tournament_judge(),
             aspects,
-            self.intent,
+            self._judged_intent(),
             seed=_generation_seed(self.settings.seed, g),
             protocol=self.settings.protocol,  # type: ignore[arg-type]  # checked by RunSettings
         )

@@ -1,0 +1,85 @@
+"""Where the structures the words name show in the judging pictures.
+
+The words of a text ("brown pot, silver branch and golden leaves") or the layers read from a
+reference picture ("faint red outer part, opaque ivory inner part") are matched to structures
+of the volume's structure map (:mod:`intuitf.intent.hints`). Seen from the judging camera,
+each such structure covers a region of the picture: its silhouette, rendered from the map's
+labels. A judge that looks at whole pictures cannot tell which colour sits on the pot and
+which on the leaves; told the regions, it can check each structure's colour where that
+structure is (:class:`~intuitf.evaluator.metric.MetricJudge`).
+
+A region is the part of a structure's silhouette that no other named structure's covers: where
+two overlap (an inner part behind an outer one) the colour seen mixes both, and a structure
+wholly behind another gets no region.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from intuitf.evaluator.types import Intent, PartRegion
+
+#: A pixel belongs to a structure's region where the structure alone, rendered opaque, covers
+#: at least this much of it.
+COVER = 0.3
+#: A structure with fewer pixels of its own than this gets no region.
+MIN_PIXELS = 12
+
+
+def part_regions(intent: Intent, volume, camera, size: tuple[int, int]) -> tuple[PartRegion, ...]:
+    """The regions of the solid structures ``intent``'s words give a colour, seen from
+    ``camera`` at ``size`` (width, height); () when the words name none.
+
+    Text and reference-picture intents only: a sketch's strokes are regions already, and an
+    edit's selection has its own mask.
+    """
+    if intent.kind not in ("text", "image") or volume is None:
+        return ()
+    from intuitf.intent.hints import intent_hints, structure_map_of
+
+    hints = [
+        h
+        for h in intent_hints(intent, volume).hints
+        if h.structure is not None and h.rgb is not None and h.opacity != "hidden"
+    ]
+
+    if not hints:
+        return ()
+    smap = structure_map_of(volume)
+    if smap.labels is None:
+        return ()
+    from intuitf.intent.atlas import _upsample
+
+    labels = _upsample(smap.labels, volume.data.shape)
+    out = []
+    for h in hints:
+        sid, rgb = int(h.structure or 0), h.rgb or (1.0, 1.0, 1.0)  # both set (filtered)
+        # The map's labels are on a coarser grid: a voxel is the structure's where its label
+        # says so and its value is the structure's material (as the atlas shows it).
+        lo, hi = smap.by_id(sid).value_range
+        voxels = (labels == sid + 1) & (volume.data >= lo) & (volume.data <= hi)
+        mask = silhouette(voxels, volume.spacing, camera, size)
+        colour = (float(rgb[0]), float(rgb[1]), float(rgb[2]))
+        out.append(PartRegion(h.words or h.material, colour, mask, h.opacity))
+    # Only the pixels where one named structure alone lies on the ray: where two overlap (an
+    # inner part behind an outer one) the colour seen is a mixture that neither word names.
+    cover = np.sum([r.mask for r in out], axis=0)
+    own = [PartRegion(r.name, r.rgb, r.mask & (cover == 1), r.look) for r in out]
+    # Solid parts only: a translucent layer's pixels mix its colour with whatever lies
+    # behind it, which is often more of the volume than the structure the words matched
+    # (checking them made a judge hide the engine's inner part to keep its casing blue).
+    return tuple(r for r in own if r.look in (None, "opaque") and r.mask.sum() >= MIN_PIXELS)
+
+
+def silhouette(voxels: np.ndarray, spacing, camera, size: tuple[int, int]) -> np.ndarray:
+    """Pixels (bool, height x width) where the ``voxels`` (bool, z y x) show from ``camera``
+    when rendered opaque."""
+    from intuitf.render import VolumeRenderer
+    from intuitf.tf import Gaussian, GaussianTF
+    from intuitf.volume import Volume
+
+    solid = Volume(voxels.astype(np.float32), tuple(spacing), "part", value_range=(0.0, 1.0))
+    # Narrow enough that empty voxels (value 0) get no opacity at all: no box.
+    tf = GaussianTF((Gaussian(1.0, 0.2, 1.0, (1.0, 1.0, 1.0)),))
+    rgba = VolumeRenderer(solid, size=size, shading=False, device="cpu").render_rgba(tf, camera)
+    return rgba[..., 3] > COVER

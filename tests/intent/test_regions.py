@@ -1,0 +1,111 @@
+"""The structures the words name, as regions of the judging picture, and the offline judge
+checking each one's colour where it is."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from helpers.shapes import potted_tree
+from intuitf.evaluator.metric import MetricJudge
+from intuitf.evaluator.types import Aspect, Choice, Intent, PartRegion
+from intuitf.intent.regions import part_regions
+from intuitf.render import Camera
+from intuitf.volume import Volume
+
+TREE_TEXT = "brown pot, silver branch and golden leaves"
+SIDE = Camera(azimuth=0.0, elevation=0.0, roll=0.0)
+
+
+def _tree() -> Volume:
+    # Only where each part shows relative to the others matters, not which way is up.
+    return Volume.from_array(potted_tree(), value_range=(0.0, 1.0))
+
+
+def test_each_named_part_gets_its_own_region_of_the_picture():
+    vol = _tree()
+    regions = part_regions(Intent(kind="text", text=TREE_TEXT), vol, SIDE, (64, 48))
+    by = {r.name: r for r in regions}
+    assert set(by) == {"pot", "branch", "leaves"}
+    for r in regions:
+        assert r.mask.shape == (48, 64) and r.mask.dtype == bool
+        # A part's silhouette, not the volume's box.
+        assert 0.003 < r.mask.mean() < 0.35
+    # Each part has pixels of its own: the words can be checked part by part.
+    pot, leaves = by["pot"].mask, by["leaves"].mask
+    assert (pot & ~leaves).sum() > 20 and (leaves & ~pot).sum() > 20
+    assert by["pot"].rgb != by["leaves"].rgb
+
+
+def test_no_regions_without_part_words_or_for_other_kinds():
+    vol = _tree()
+    assert part_regions(Intent(kind="text", text="a colourful picture"), vol, SIDE, (32, 32)) == ()
+    assert part_regions(Intent(kind="none"), vol, SIDE, (32, 32)) == ()
+    assert part_regions(Intent(kind="text", text=TREE_TEXT), None, SIDE, (32, 32)) == ()
+
+
+def _picture(left_rgb, right_rgb, size=64) -> np.ndarray:
+    img = np.zeros((size, size, 3), np.uint8)
+    img[16:48, 8:30] = np.asarray(left_rgb) * 255
+    img[16:48, 34:56] = np.asarray(right_rgb) * 255
+    # Shading: the lower half of each part darker, as a headlight leaves a surface.
+    img[32:48] = (img[32:48] * 0.6).astype(np.uint8)
+    return img
+
+
+def test_the_offline_judge_checks_each_part_in_its_own_region():
+    red, blue = (0.86, 0.12, 0.12), (0.2, 0.3, 0.9)
+    left = np.zeros((64, 64), bool)
+    left[16:48, 8:30] = True
+    right = np.zeros((64, 64), bool)
+    right[16:48, 34:56] = True
+    text = "red handle and blue blade"
+    plain = Intent(kind="text", text=text)
+    told = Intent(
+        kind="text",
+        text=text,
+        part_regions=(PartRegion("handle", red, left), PartRegion("blade", blue, right)),
+    )
+    right_way, swapped = _picture(red, blue), _picture(blue, red)
+    aspect = [Aspect("text_alignment", "Alignment with the description", "d")]
+    judge = MetricJudge()
+    # Both colours are in both pictures: by colours alone the two are alike.
+    assert judge.compare_sync(right_way, swapped, aspect, plain).overall is Choice.TIE
+    # Told where the handle and the blade are, the judge sees which picture is right.
+    assert judge.compare_sync(right_way, swapped, aspect, told).overall is Choice.FIRST
+    assert judge.compare_sync(swapped, right_way, aspect, told).overall is Choice.SECOND
+    # A region where nothing shows does not count as the colour being there.
+    empty = _picture((0, 0, 0), blue)
+    assert judge.score(empty, "text_alignment", told) < judge.score(
+        right_way, "text_alignment", told
+    )
+
+
+def test_regions_are_not_part_of_what_a_model_is_asked():
+    mask = np.ones((8, 8), bool)
+    a = Intent(kind="text", text="red pot")
+    b = Intent(kind="text", text="red pot", part_regions=(PartRegion("pot", (1, 0, 0), mask),))
+    assert a.fingerprint() == b.fingerprint()
+
+
+def test_the_session_gives_its_judge_the_regions_of_its_camera(tmp_path):
+    from intuitf.session import RunSettings, Session
+
+    vol = _tree()
+    settings = RunSettings(population=4, generations=1, image_size=48, output_size=48, seed=0,
+                           camera=SIDE.to_dict())  # fmt: skip
+    sess = Session.create(vol, intent=Intent(kind="text", text=TREE_TEXT), judge=MetricJudge(),
+                          settings=settings)  # fmt: skip
+    try:
+        judged = sess._judged_intent()
+        assert {r.name for r in judged.part_regions} == {"pot", "branch", "leaves"}
+        assert all(r.mask.shape == (48, 48) for r in judged.part_regions)
+        assert sess._judged_intent() is judged  # worked out once
+        sess.set_camera(Camera(azimuth=90.0, elevation=10.0))
+        turned = sess._judged_intent()
+        assert turned is not judged
+        pot_before = next(r for r in judged.part_regions if r.name == "pot").mask
+        pot_after = next(r for r in turned.part_regions if r.name == "pot").mask
+        assert not np.array_equal(pot_before, pot_after)
+        sess.step()  # a generation judged with them
+    finally:
+        sess.close()
