@@ -22,8 +22,10 @@ from intuitf.evaluator.types import Intent, PartRegion
 #: A pixel belongs to a structure's region where the structure alone, rendered opaque, covers
 #: at least this much of it.
 COVER = 0.3
-#: A structure with fewer pixels of its own than this gets no region.
-MIN_PIXELS = 12
+#: A structure with less of the picture than this to itself gets no region: a few pixels
+#: (the CT head's skull where the skin's structure happens not to cover it) say nothing
+#: about its colour.
+MIN_SHARE = 0.005
 
 
 def part_regions(intent: Intent, volume, camera, size: tuple[int, int]) -> tuple[PartRegion, ...]:
@@ -68,7 +70,7 @@ def part_regions(intent: Intent, volume, camera, size: tuple[int, int]) -> tuple
     # Solid parts only: a translucent layer's pixels mix its colour with whatever lies
     # behind it, which is often more of the volume than the structure the words matched
     # (checking them made a judge hide the engine's inner part to keep its casing blue).
-    return tuple(r for r in own if r.look in (None, "opaque") and r.mask.sum() >= MIN_PIXELS)
+    return tuple(r for r in own if r.look in (None, "opaque") and r.mask.mean() >= MIN_SHARE)
 
 
 def silhouette(voxels: np.ndarray, spacing, camera, size: tuple[int, int]) -> np.ndarray:
