@@ -41,6 +41,9 @@ def test_no_regions_without_part_words_or_for_other_kinds():
     assert part_regions(Intent(kind="text", text="a colourful picture"), vol, SIDE, (32, 32)) == ()
     assert part_regions(Intent(kind="none"), vol, SIDE, (32, 32)) == ()
     assert part_regions(Intent(kind="text", text=TREE_TEXT), None, SIDE, (32, 32)) == ()
+    # A translucent part mixes its colour into what lies behind it: no part is checked alone.
+    faint = "brown pot, faint silver branch and golden leaves"
+    assert part_regions(Intent(kind="text", text=faint), vol, SIDE, (32, 32)) == ()
 
 
 def _picture(left_rgb, right_rgb, size=64) -> np.ndarray:

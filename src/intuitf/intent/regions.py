@@ -29,8 +29,9 @@ MIN_SHARE = 0.005
 
 
 def part_regions(intent: Intent, volume, camera, size: tuple[int, int]) -> tuple[PartRegion, ...]:
-    """The regions of the solid structures ``intent``'s words give a colour, seen from
-    ``camera`` at ``size`` (width, height); () when the words name none.
+    """The regions of the structures ``intent``'s words give a colour, seen from ``camera``
+    at ``size`` (width, height); () unless the words name solid parts only, each matched to
+    a structure.
 
     Text and reference-picture intents only: a sketch's strokes are regions already, and an
     edit's selection has its own mask.
@@ -39,13 +40,14 @@ def part_regions(intent: Intent, volume, camera, size: tuple[int, int]) -> tuple
         return ()
     from intuitf.intent.hints import intent_hints, structure_map_of
 
-    hints = [
-        h
-        for h in intent_hints(intent, volume).hints
-        if h.structure is not None and h.rgb is not None and h.opacity != "hidden"
-    ]
-
-    if not hints:
+    hints = [h for h in intent_hints(intent, volume).hints if h.rgb is not None]
+    hints = [h for h in hints if h.opacity != "hidden"]
+    # Only when the words name solid parts alone, each on a structure: a translucent layer
+    # ("faint red skin") lies in front of other parts and mixes its colour into their
+    # pixels, over more of the picture than its matched structure covers (checking the
+    # skull's region under faint skin made a judge hide the skin; checking the engine's
+    # translucent casing made it hide the inner part).
+    if not hints or any(h.structure is None or h.opacity not in (None, "opaque") for h in hints):
         return ()
     smap = structure_map_of(volume)
     if smap.labels is None:
@@ -67,10 +69,7 @@ def part_regions(intent: Intent, volume, camera, size: tuple[int, int]) -> tuple
     # inner part behind an outer one) the colour seen is a mixture that neither word names.
     cover = np.sum([r.mask for r in out], axis=0)
     own = [PartRegion(r.name, r.rgb, r.mask & (cover == 1), r.look) for r in out]
-    # Solid parts only: a translucent layer's pixels mix its colour with whatever lies
-    # behind it, which is often more of the volume than the structure the words matched
-    # (checking them made a judge hide the engine's inner part to keep its casing blue).
-    return tuple(r for r in own if r.look in (None, "opaque") and r.mask.mean() >= MIN_SHARE)
+    return tuple(r for r in own if r.mask.mean() >= MIN_SHARE)
 
 
 def silhouette(voxels: np.ndarray, spacing, camera, size: tuple[int, int]) -> np.ndarray:
