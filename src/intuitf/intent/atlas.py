@@ -107,7 +107,7 @@ def atlas_images(volume, smap: StructureMap, camera=None, size: int = 160) -> di
         raise ValueError("The structure map has no label grid to render the atlas from.")
     cam = camera or Camera(azimuth=30.0, elevation=20.0)
     data = volume.data
-    labels = _upsample(smap.labels, data.shape)
+    labels = upsample_labels(smap.labels, data.shape)
     out = {}
     for s in smap.foreground():
         only = np.where(labels == s.id + 1, data, 0.0).astype(np.float32)
@@ -120,7 +120,7 @@ def atlas_images(volume, smap: StructureMap, camera=None, size: int = 160) -> di
     return out
 
 
-def _upsample(labels: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+def upsample_labels(labels: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     """Nearest-neighbour labels of the reduced grid on the full grid."""
     idx = [np.minimum((np.arange(n) * labels.shape[k]) // n, labels.shape[k] - 1)
            for k, n in enumerate(shape)]  # fmt: skip

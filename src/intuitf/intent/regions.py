@@ -23,8 +23,7 @@ from intuitf.evaluator.types import Intent, PartRegion
 #: at least this much of it.
 COVER = 0.3
 #: A structure with less of the picture than this to itself gets no region: a few pixels
-#: (the CT head's skull where the skin's structure happens not to cover it) say nothing
-#: about its colour.
+#: say nothing about its colour.
 MIN_SHARE = 0.005
 
 
@@ -52,9 +51,9 @@ def part_regions(intent: Intent, volume, camera, size: tuple[int, int]) -> tuple
     smap = structure_map_of(volume)
     if smap.labels is None:
         return ()
-    from intuitf.intent.atlas import _upsample
+    from intuitf.intent.atlas import upsample_labels
 
-    labels = _upsample(smap.labels, volume.data.shape)
+    labels = upsample_labels(smap.labels, volume.data.shape)
     out = []
     for h in hints:
         sid, rgb = int(h.structure or 0), h.rgb or (1.0, 1.0, 1.0)  # both set (filtered)
