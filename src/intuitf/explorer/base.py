@@ -12,14 +12,7 @@ from intuitf.explorer.bounds import Bounds
 from intuitf.explorer.candidate import Candidate, candidate_id
 from intuitf.explorer.fitness import rank_fitness
 from intuitf.explorer.genome import is_duplicate_of_any
-from intuitf.explorer.hints import (
-    HINT_COLOR_VARIATION,
-    Hint,
-    as_hints,
-    hint_for,
-    hinted_tf,
-    quiet_hidden,
-)
+from intuitf.explorer.hints import Hint, as_hints, hint_color, hint_for, hinted_tf, quiet_hidden
 from intuitf.explorer.operators import MutationParams, mutate
 from intuitf.explorer.population import materials_of, random_tf, seeded_tf
 from intuitf.explorer.stages import STAGES, StagePreset
@@ -334,8 +327,7 @@ class BaseExplorer:
         for k, g in enumerate(gs):
             h = hint_for(g.mean, placed)
             if h is not None and self._rng.random() < self._preset.palette_share:
-                rgb = self.bounds.sample_palette_color(self._rng, [h.color], HINT_COLOR_VARIATION)
-                gs[k] = replace(g, color=rgb)
+                gs[k] = replace(g, color=hint_color(self._rng, h.color, self.bounds))
         return tf.with_gaussians(gs)
 
     def _fresh_population(

@@ -112,6 +112,12 @@ class Hint:
         )
 
 
+def hint_color(rng: np.random.Generator, color: RGB, bounds: Bounds) -> RGB:
+    """A hint's ``color`` as a Gaussian takes it: the named colour, varied a little
+    (:data:`HINT_COLOR_VARIATION`)."""
+    return bounds.sample_palette_color(rng, [color], HINT_COLOR_VARIATION)
+
+
 def as_hints(hints: Sequence[Hint | Mapping | object]) -> tuple[Hint, ...]:
     """Hints from :class:`Hint` objects, dicts, or objects with the same attributes."""
     out = []
@@ -184,11 +190,7 @@ def hinted_tf(
         )
         band = h.height or bounds.height_init
         height = 0.0 if h.hidden else sample_hint_height(rng, band, bounds)
-        rgb = (
-            bounds.sample_palette_color(rng, [h.color], HINT_COLOR_VARIATION)
-            if h.color
-            else color(rng)
-        )
+        rgb = hint_color(rng, h.color, bounds) if h.color else color(rng)
         gs.append(Gaussian(mean, width, height, rgb))
     others = [m for m in materials if all(not h.reaches(m.center) for h in avoid)]
     order = list(rng.permutation(len(others))) if others else []
@@ -246,7 +248,7 @@ def edit_step(g: Gaussian, hint: Hint, rng: np.random.Generator, bounds: Bounds)
     h = min(bounds.height[1], max(bounds.height[0], h))
     color = g.color
     if hint.color is not None:
-        color = bounds.sample_palette_color(rng, [hint.color], HINT_COLOR_VARIATION)
+        color = hint_color(rng, hint.color, bounds)
     elif d in ("brighter", "darker"):
         hue, sat, lum = rgb_to_hsl(g.color)
         step = rng.uniform(0.08, 0.25) * (1.0 if d == "brighter" else -1.0)

@@ -16,10 +16,10 @@ from scipy.optimize import linear_sum_assignment
 
 from intuitf.explorer.bounds import Bounds, hsl_to_rgb, rgb_to_hsl
 from intuitf.explorer.hints import (
-    HINT_COLOR_VARIATION,
     Hint,
     edit_hint,
     edit_step,
+    hint_color,
     hint_for,
     sample_hint_height,
 )
@@ -189,8 +189,7 @@ def mutate(
             gs[i] = replace(gs[i], color=_mutate_color(gs[i].color, rng, p, b, own.get(i)))
     for i, hint in hinted.items():
         if hint.color is not None:
-            rgb = b.sample_palette_color(rng, [hint.color], HINT_COLOR_VARIATION)
-            gs[i] = replace(gs[i], color=rgb)
+            gs[i] = replace(gs[i], color=hint_color(rng, hint.color, b))
     return tf.with_gaussians(gs)
 
 
