@@ -141,6 +141,27 @@ def test_sketch_prefers_stroke_colours_and_preservation():
     assert j.score(good, "stroke_color_agreement", intent) > -15.0  # mean ΔE under strokes
 
 
+def test_sketch_a_hidden_stroked_structure_is_worse_than_a_wrong_colour():
+    """Two strokes on two structures: a picture that hides the blue-stroked one loses to one
+    that shows it in the other stroke's colour (black is nearer blue than yellow is, so a
+    plain ΔE preferred hiding it)."""
+    j = MetricJudge()
+    top, root = disk(0.15, 0.5, 0.3), disk(0.15, 0.5, 0.7)
+    base = paint(paint(canvas(), top, (200, 200, 200)), root, (200, 200, 200))
+    sketch = np.zeros((S, S, 4), np.uint8)
+    sketch[disk(0.08, 0.5, 0.3)] = (230, 210, 40, 255)  # yellow on the top
+    sketch[disk(0.08, 0.5, 0.7)] = (30, 40, 230, 255)  # blue on the root
+    intent = Intent(kind="sketch", sketch=sketch, base=base)
+    yellow_top_gone_root = paint(canvas(), top, (230, 210, 40))
+    both_yellow = paint(paint(canvas(), top, (230, 210, 40)), root, (230, 210, 40))
+    agree = aspect("stroke_color_agreement")
+    v = cmp(j, yellow_top_gone_root, both_yellow, [agree], intent)
+    assert v.overall is Choice.SECOND
+    # Without a base the judge cannot know a structure was there: plain ΔE decides.
+    plain = Intent(kind="sketch", sketch=sketch)
+    assert cmp(j, yellow_top_gone_root, both_yellow, [agree], plain).overall is Choice.FIRST
+
+
 def test_text_named_colours_and_opacity_words():
     j = MetricJudge()
     text_aspect = [aspect("text_alignment")]

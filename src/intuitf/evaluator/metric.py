@@ -48,7 +48,9 @@ aspect key                     measure (higher is better unless noted)
                                128 x 128
 ``stroke_color_agreement``     minus the mean over strokes (the pixels of one colour) of
                                the mean CIE76 ΔE between the rendering and the stroke's
-                               colour where the sketch's alpha > 0
+                               colour where the sketch's alpha > 0; a pixel where the base
+                               showed a structure and the rendering shows none counts as
+                               the worst ΔE (hiding a stroked structure is never a match)
 ``unmarked_preservation``      minus the mean ΔE to the base rendering where alpha == 0
 ``edit_instruction_alignment`` in the region (``intent.selection_mask``: the pixels the
                                selected features cover in the base; else the sketch's alpha;
@@ -105,6 +107,9 @@ _NAMED_DELTA_E = 25.0
 _ON_COLOUR = 6.0
 #: Hue difference (degrees) within which a pixel of a named colour's hue counts fully.
 _ON_HUE = 10.0
+#: A stroke pixel's ΔE where the base showed a structure and the picture shows none: more
+#: than any two sRGB colours are apart in CIELAB (blue to yellow is about 235).
+_ABSENT_DELTA_E = 260.0
 #: Share of the foreground at which a named colour counts as fully present.
 _NAMED_SATURATION = 0.05
 #: Share of the foreground at which a colour a clause names counts as fully shown.
@@ -408,11 +413,22 @@ class MetricJudge:
 
     def _stroke(self, f: _Features, intent: Intent) -> float | None:
         """Minus the mean over strokes (pixels of one colour) of their mean ΔE: each stroke
-        counts alike, so a long stroke cannot hide a short one in the wrong colour."""
+        counts alike, so a long stroke cannot hide a short one in the wrong colour.
+
+        A stroke pixel on something the base picture shows that now shows nothing counts as
+        :data:`_ABSENT_DELTA_E`, worse than any colour: a stroke asks for the structure under
+        it in that colour, and hiding the structure answers neither. (Measured plainly, black
+        is nearer blue than yellow is, and a blue stroke on a root that shares its values
+        with a yellow-stroked crown was met by making the root vanish.)
+        """
         mask, stroke_lab = _strokes(intent, f.lab.shape[:2])
         if mask is None or not mask.any():
             return None
         de = np.linalg.norm(f.lab - stroke_lab, axis=2)
+        if intent.base is not None:
+            shown = _resize_like(self.features(intent.base).fg.astype(np.float32),
+                                 f.lab.shape[:2], order=0) > 0.5  # fmt: skip
+            de = np.where(shown & ~f.fg, _ABSENT_DELTA_E, de)
         keys = np.round(stroke_lab[mask] / 4.0).astype(np.int64)
         _, which = np.unique(keys, axis=0, return_inverse=True)
         per = np.bincount(which.ravel(), weights=de[mask]) / np.bincount(which.ravel())
