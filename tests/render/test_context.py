@@ -38,6 +38,25 @@ def test_renderers_of_a_volume_share_one_gradient_and_block_ranges():
     assert VolumeRenderer(_volume(seed=1), size=32).context is not a.context
 
 
+def test_shading_voxels_hold_the_gradient_and_the_value():
+    """What a shaded sample reads, side by side: the gradient of ``gradient()`` and the value
+    coded in 16 bits (an 8-bit volume's values exactly, any other within half a level)."""
+    vol = _volume()
+    lit = render_context(vol).shading_voxels()
+    assert lit.dtype == np.int16 and lit.shape == vol.data.shape + (4,)
+    assert np.shares_memory(lit, render_context(vol).gradient())
+    g = np.empty(vol.data.shape + (3,), dtype=np.int16)
+    kernels.central_gradient(vol.data, g)
+    assert np.array_equal(lit[..., :3], g)
+    decoded = lit[..., 3] * kernels.VALUE_CODE_SCALE + kernels.VALUE_CODE_OFFSET
+    assert np.abs(decoded - vol.data).max() <= 0.5 / 65535 + 1e-7
+    eight_bit = Volume.from_array(np.arange(256, dtype=np.uint8).reshape(4, 8, 8), name="levels")
+    lit8 = render_context(eight_bit).shading_voxels()
+    decoded = lit8[..., 3] * kernels.VALUE_CODE_SCALE + kernels.VALUE_CODE_OFFSET
+    assert np.abs(decoded - eight_bit.data).max() < 1e-6
+    assert len(np.unique(lit8[..., 3])) == 256
+
+
 def test_the_context_goes_with_its_volume():
     vol = _volume()
     VolumeRenderer(vol, size=16, device="cpu").gradient()

@@ -139,7 +139,7 @@ def test_empty_space_skipping_changes_no_pixel(foot):
             fine = r._visible_blocks(lut, FINE_BLOCK_SIZE)
             assert coarse.mean() < 0.6 and fine.mean() < coarse.mean()
             every = np.empty((96 * 96, 4), dtype=np.float32)
-            kernels.march(foot.data, r._shading_grad(), shading, np.ones_like(coarse),
+            kernels.march(foot.data, r._shading_voxels(), shading, np.ones_like(coarse),
                           BLOCK_SIZE, np.ones_like(fine), 1, lut, False,
                           r.frame(cam).packed(), r._spacing, r.sample_distance,
                           r.shade_params, EARLY_STOP, every)  # fmt: skip

@@ -166,7 +166,7 @@ class SampleCache(CacheViews):
             diffuse = specular = np.zeros(1, dtype=np.uint8)
         kernels.fill_samples(
             renderer.volume.data,
-            renderer._shading_grad(),
+            renderer._shading_voxels(),
             shading,
             cam,
             renderer._spacing,

@@ -80,9 +80,9 @@ class DeviceVolume:
     def gradient(self) -> Any:
         if self.grad is None:
             ctx = self.context
-            if ctx.has_gradient:
-                g = ctx.gradient()
-            else:  # computed here without keeping the 6-bytes-per-voxel host copy
+            if ctx.has_gradient:  # a view of the shading voxels: copied to one block
+                g = np.ascontiguousarray(ctx.gradient())
+            else:  # computed here without keeping the 8-bytes-per-voxel host copy
                 g = np.empty(ctx.shape + (3,), dtype=np.int16)
                 kernels.central_gradient(ctx.data, g)
             self.grad = cuda.to_device(g)

@@ -26,6 +26,11 @@ from numba import njit, prange
 GRAD_SCALE = 32767.0
 #: Gradient magnitude (normalised value per voxel) below which a sample counts as flat.
 FLAT_GRADIENT = 1e-3
+#: The value in a shading voxel (:func:`value_codes`): ``v = code * VALUE_CODE_SCALE +
+#: VALUE_CODE_OFFSET``, 65536 levels over [0, 1] (an 8-bit volume's values exactly; a 16-bit
+#: one's within 8e-6).
+VALUE_CODE_SCALE = 1.0 / 65535.0
+VALUE_CODE_OFFSET = 32768.0 / 65535.0
 #: Cached samples are grouped in segments of 2**SEG_SHIFT for empty-space skipping.
 SEG_SHIFT = 5
 #: Rows are handed to the threads in this stride (made coprime with the height): each thread's
@@ -74,6 +79,23 @@ def central_gradient(data, out):
                 out[z, y, x, 0] = np.int16(round(gx * GRAD_SCALE))
                 out[z, y, x, 1] = np.int16(round(gy * GRAD_SCALE))
                 out[z, y, x, 2] = np.int16(round(gz * GRAD_SCALE))
+
+
+@njit(parallel=True, cache=True)
+def value_codes(data, out):
+    """``out[z, y, x, 3]``: the value of ``data`` as an int16 code (:data:`VALUE_CODE_SCALE`).
+
+    With :func:`central_gradient` in components 0-2, ``out`` holds a shading voxel: what a
+    shaded sample reads, value and gradient, in 8 bytes, so the eight corners of a sample
+    take four cache lines instead of eight (with :func:`_lit_at`, shaded 512² stills of the
+    bonsai, foot, CT head and chest 4-13 % faster).
+    """
+    nz, ny, nx = data.shape
+    for z in prange(nz):
+        for y in range(ny):
+            for x in range(nx):
+                v = min(max(data[z, y, x], 0.0), 1.0)
+                out[z, y, x, 3] = np.int16(round(v * 65535.0) - 32768)
 
 
 @njit(parallel=True, cache=True)
@@ -190,10 +212,7 @@ def _cell(p, n):
 
 
 @njit(cache=True, fastmath=True, inline="always")
-def _trilinear(data, px, py, pz, nx, ny, nz):
-    i, fx = _cell(px, nx)
-    j, fy = _cell(py, ny)
-    k, fz = _cell(pz, nz)
+def _trilinear_at(data, i, j, k, fx, fy, fz):
     c00 = data[k, j, i] * (1.0 - fx) + data[k, j, i + 1] * fx
     c01 = data[k, j + 1, i] * (1.0 - fx) + data[k, j + 1, i + 1] * fx
     c10 = data[k + 1, j, i] * (1.0 - fx) + data[k + 1, j, i + 1] * fx
@@ -204,24 +223,35 @@ def _trilinear(data, px, py, pz, nx, ny, nz):
 
 
 @njit(cache=True, fastmath=True, inline="always")
-def _tri_component(grad, i, j, k, fx, fy, fz, c):
-    c00 = grad[k, j, i, c] * (1.0 - fx) + grad[k, j, i + 1, c] * fx
-    c01 = grad[k, j + 1, i, c] * (1.0 - fx) + grad[k, j + 1, i + 1, c] * fx
-    c10 = grad[k + 1, j, i, c] * (1.0 - fx) + grad[k + 1, j, i + 1, c] * fx
-    c11 = grad[k + 1, j + 1, i, c] * (1.0 - fx) + grad[k + 1, j + 1, i + 1, c] * fx
-    return (c00 * (1.0 - fy) + c01 * fy) * (1.0 - fz) + (c10 * (1.0 - fy) + c11 * fy) * fz
+def _lit_at(lit, i, j, k, fx, fy, fz):
+    """Gradient (x, y, z) and value, trilinear in cell (i, j, k) of the shading voxels.
+
+    The four components from one set of corner weights: the compiler vectorises them (about
+    5 % faster than one component at a time).
+    """
+    ex = 1.0 - fx
+    ey = 1.0 - fy
+    ez = 1.0 - fz
+    a0 = 0.0
+    a1 = 0.0
+    a2 = 0.0
+    a3 = 0.0
+    for dk in range(2):
+        wk = fz if dk else ez
+        for dj in range(2):
+            wjk = wk * (fy if dj else ey)
+            for di in range(2):
+                w = wjk * (fx if di else ex)
+                a0 += w * lit[k + dk, j + dj, i + di, 0]
+                a1 += w * lit[k + dk, j + dj, i + di, 1]
+                a2 += w * lit[k + dk, j + dj, i + di, 2]
+                a3 += w * lit[k + dk, j + dj, i + di, 3]
+    return a0, a1, a2, a3 * VALUE_CODE_SCALE + VALUE_CODE_OFFSET
 
 
 @njit(cache=True, fastmath=True, inline="always")
-def _shade_terms(grad, px, py, pz, nx, ny, nz, isx, isy, isz, lx, ly, lz, hx, hy, hz, shin):
-    """(|n.l|, |n.h|**shininess) at a point from the trilinear precomputed gradient."""
-    i, fx = _cell(px, nx)
-    j, fy = _cell(py, ny)
-    k, fz = _cell(pz, nz)
-    # Index-space differences divided by spacing: the world gradient (up to a common scale).
-    gx = _tri_component(grad, i, j, k, fx, fy, fz, 0) * isx
-    gy = _tri_component(grad, i, j, k, fx, fy, fz, 1) * isy
-    gz = _tri_component(grad, i, j, k, fx, fy, fz, 2) * isz
+def _shade_terms(gx, gy, gz, lx, ly, lz, hx, hy, hz, shin):
+    """(|n.l|, |n.h|**shininess) for the world gradient (gx, gy, gz) (up to a scale)."""
     m = math.sqrt(gx * gx + gy * gy + gz * gz)
     if m < FLAT_GRADIENT * GRAD_SCALE:
         return 1.0, 0.0
@@ -263,7 +293,7 @@ def _half_vector(lx, ly, lz, dx, dy, dz):
 # ---------------------------------------------------------------------------------------------
 @njit(parallel=True, cache=True, fastmath=True)
 def march(
-    data, grad, shading, vis, bsize, fine, fine_shift, lut, nearest, cam, spacing, dt,
+    data, lit, shading, vis, bsize, fine, fine_shift, lut, nearest, cam, spacing, dt,
     shade_params, t_stop, out,
 ):  # fmt: skip
     """Render every pixel of ``cam`` into ``out`` (n_pixels, 4) premultiplied RGBA.
@@ -274,8 +304,10 @@ def march(
     the sample grid, so skipping changes no pixel. ``fine`` marks the same for blocks of
     ``2**fine_shift`` cells: inside a visible block, a sample in an invisible fine block is
     passed over without interpolating (often most of a visible block's samples: the bonsai's
-    default TF classifies 19 M samples for 4 M visible ones with the 8³ grid alone). ``nearest`` rounds the value to the nearest
-    entry instead of interpolating, exactly as the sample cache does (used to test the cache).
+    default TF classifies 19 M samples for 4 M visible ones with the 8³ grid alone).
+    ``nearest`` rounds the value to the nearest entry instead of interpolating, exactly as
+    the sample cache does (used to test the cache). With ``shading``, values and gradients
+    are read from ``lit``, the shading voxels (:func:`value_codes`); else values from ``data``.
     ``bsize`` is a power of two. The picture is walked in tiles of :data:`TILE` pixels,
     handed to the threads interleaved (:func:`row_stride`).
     """
@@ -345,7 +377,14 @@ def march(
                         if fine[fbz, fby, fbx] == 0:
                             k += 1
                             continue
-                        v = _trilinear(data, px, py, pz, nx, ny, nz)
+                        ci, fx = _cell(px, nx)
+                        cj, fy = _cell(py, ny)
+                        ck, fz = _cell(pz, nz)
+                        if shading:
+                            gx, gy, gz, v = _lit_at(lit, ci, cj, ck, fx, fy, fz)
+                        else:
+                            gx = gy = gz = 0.0
+                            v = _trilinear_at(data, ci, cj, ck, fx, fy, fz)
                         x = v * scale
                         if nearest:
                             x = float(int(x + 0.5))
@@ -361,14 +400,15 @@ def march(
                             cg = lut[q, 1] * (1.0 - f) + lut[q + 1, 1] * f
                             cb = lut[q, 2] * (1.0 - f) + lut[q + 1, 2] * f
                             if shading:
+                                # Index-space differences divided by spacing: the world
+                                # gradient (up to a common scale).
                                 ndl, sp = _shade_terms(
-                                    grad, px, py, pz, nx, ny, nz, isx, isy, isz,
-                                    lx, ly, lz, hx, hy, hz, shin,
-                                )  # fmt: skip
-                                lit = ka + kd * ndl
-                                cr = min(1.0, cr * lit + ks * sp)
-                                cg = min(1.0, cg * lit + ks * sp)
-                                cb = min(1.0, cb * lit + ks * sp)
+                                    gx * isx, gy * isy, gz * isz, lx, ly, lz, hx, hy, hz, shin
+                                )
+                                light = ka + kd * ndl
+                                cr = min(1.0, cr * light + ks * sp)
+                                cg = min(1.0, cg * light + ks * sp)
+                                cb = min(1.0, cb * light + ks * sp)
                             w = tr * a
                             r += w * cr
                             g += w * cg
@@ -405,9 +445,9 @@ def count_samples(cam, spacing, dims, dt, counts):
 
 @njit(parallel=True, cache=True, fastmath=True)
 def fill_samples(
-    data, grad, shading, cam, spacing, dt, nl, shin, offsets, samples, diffuse, specular
+    data, lit, shading, cam, spacing, dt, nl, shin, offsets, samples, diffuse, specular
 ):
-    """Sample every ray (same positions as :func:`march`) and store quantised values.
+    """Sample every ray (same positions and values as :func:`march`) and store quantised values.
 
     ``samples[k] = round(v * (nl - 1))``; with shading, ``diffuse[k] = round(255 * |n.l|)`` and
     ``specular[k] = round(255 * |n.h| ** shininess)``.
@@ -434,11 +474,17 @@ def fill_samples(
                 px = oxi + t * dxi
                 py = oyi + t * dyi
                 pz = ozi + t * dzi
-                v = _trilinear(data, px, py, pz, nx, ny, nz)
+                ci, fx = _cell(px, nx)
+                cj, fy = _cell(py, ny)
+                ck, fz = _cell(pz, nz)
+                if shading:
+                    gx, gy, gz, v = _lit_at(lit, ci, cj, ck, fx, fy, fz)
+                else:
+                    v = _trilinear_at(data, ci, cj, ck, fx, fy, fz)
                 samples[s0 + k] = int(v * scale + 0.5)
                 if shading:
                     ndl, sp = _shade_terms(
-                        grad, px, py, pz, nx, ny, nz, isx, isy, isz, lx, ly, lz, hx, hy, hz, shin
+                        gx * isx, gy * isy, gz * isz, lx, ly, lz, hx, hy, hz, shin
                     )
                     diffuse[s0 + k] = np.uint8(int(ndl * 255.0 + 0.5))
                     specular[s0 + k] = np.uint8(int(sp * 255.0 + 0.5))

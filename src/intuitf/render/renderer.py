@@ -157,8 +157,11 @@ class VolumeRenderer:
         """Int16 central-difference gradient (z, y, x, 3) of the volume (its context's)."""
         return self.context.gradient()
 
-    def _shading_grad(self) -> np.ndarray:
-        return self.gradient() if self.shading else np.zeros((1, 1, 1, 3), dtype=np.int16)
+    def _shading_voxels(self) -> np.ndarray:
+        """What the kernels read shaded samples from (a stand-in when not shading)."""
+        if self.shading:
+            return self.context.shading_voxels()
+        return np.zeros((1, 1, 1, 4), dtype=np.int16)
 
     def _block_ranges(self) -> tuple[np.ndarray, np.ndarray]:
         """LUT index range (lo, hi) each empty-space block's samples can take."""
@@ -219,7 +222,7 @@ class VolumeRenderer:
         out = np.empty((self.width * self.height, 4), dtype=np.float32)
         kernels.march(
             self.volume.data,
-            self._shading_grad(),
+            self._shading_voxels(),
             self.shading,
             self._visible_blocks(lut, BLOCK_SIZE),
             BLOCK_SIZE,
