@@ -3,10 +3,10 @@
 A volume's derived rendering data is large: the shading voxels (int16 central-difference
 gradient and value, side by side) are 8 bytes a voxel (about 1.3 GB for a 512×512×614 CT, next
 to 0.64 GB of float32 voxels), and the GPU copies of the data and gradient as much again in GPU
-memory. Every renderer of a volume (the
-Session's, each interactive view size, drag frames, the selection measures, ``RunStore.render``,
-batch's reference) takes it from one :class:`RenderContext`, so it exists once whatever the
-number of renderers, views and front ends.
+memory. Every renderer of a volume (the Session's, each interactive view size, drag frames, the
+selection measures, ``RunStore.render``, batch's reference) takes it from one
+:class:`RenderContext`, so it exists once whatever the number of renderers, views and front
+ends.
 
 ``render_context(volume)`` returns the volume's context, made on first use and held by weak
 reference to the volume: when the last reference to the volume goes, so does its context. The

@@ -250,6 +250,18 @@ def _lit_at(lit, i, j, k, fx, fy, fz):
 
 
 @njit(cache=True, fastmath=True, inline="always")
+def _sample(data, lit, shading, px, py, pz, nx, ny, nz):
+    """(gradient x, y, z, value) at index-space point p: all four from the shading voxels
+    when shading, else the value from ``data`` (and a zero gradient)."""
+    i, fx = _cell(px, nx)
+    j, fy = _cell(py, ny)
+    k, fz = _cell(pz, nz)
+    if shading:
+        return _lit_at(lit, i, j, k, fx, fy, fz)
+    return 0.0, 0.0, 0.0, _trilinear_at(data, i, j, k, fx, fy, fz)
+
+
+@njit(cache=True, fastmath=True, inline="always")
 def _shade_terms(gx, gy, gz, lx, ly, lz, hx, hy, hz, shin):
     """(|n.l|, |n.h|**shininess) for the world gradient (gx, gy, gz) (up to a scale)."""
     m = math.sqrt(gx * gx + gy * gy + gz * gz)
@@ -377,14 +389,7 @@ def march(
                         if fine[fbz, fby, fbx] == 0:
                             k += 1
                             continue
-                        ci, fx = _cell(px, nx)
-                        cj, fy = _cell(py, ny)
-                        ck, fz = _cell(pz, nz)
-                        if shading:
-                            gx, gy, gz, v = _lit_at(lit, ci, cj, ck, fx, fy, fz)
-                        else:
-                            gx = gy = gz = 0.0
-                            v = _trilinear_at(data, ci, cj, ck, fx, fy, fz)
+                        gx, gy, gz, v = _sample(data, lit, shading, px, py, pz, nx, ny, nz)
                         x = v * scale
                         if nearest:
                             x = float(int(x + 0.5))
@@ -474,13 +479,7 @@ def fill_samples(
                 px = oxi + t * dxi
                 py = oyi + t * dyi
                 pz = ozi + t * dzi
-                ci, fx = _cell(px, nx)
-                cj, fy = _cell(py, ny)
-                ck, fz = _cell(pz, nz)
-                if shading:
-                    gx, gy, gz, v = _lit_at(lit, ci, cj, ck, fx, fy, fz)
-                else:
-                    v = _trilinear_at(data, ci, cj, ck, fx, fy, fz)
+                gx, gy, gz, v = _sample(data, lit, shading, px, py, pz, nx, ny, nz)
                 samples[s0 + k] = int(v * scale + 0.5)
                 if shading:
                     ndl, sp = _shade_terms(
