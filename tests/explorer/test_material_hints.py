@@ -96,6 +96,34 @@ def test_first_population_holds_hinted_candidates():
     assert [c.tf for c in a.ask()] == [c.tf for c in b.ask()]
 
 
+def test_customize_begins_with_fresh_hinted_tfs_in_place_of_the_bred_tail():
+    """Initialization judges quality alone and can drop every hinted TF before the words are
+    judged: the customize stage gets a quarter of its population fresh on the hints again,
+    in place of roulette-bred children, the elites kept. Refine and runs without hints do
+    not."""
+    ex = GeneticExplorer(population=16, n_gaussians=5, seed=1, histogram=_histogram(), hints=HINTS)
+    pop = ex.ask()
+    # Quality ranked every hinted TF last.
+    ranking = [c.id for c in pop if c.origin != "hint"] + [c.id for c in pop if c.origin == "hint"]
+    ex.tell(ranking)
+    before = ex.ask()
+    ex.set_stage("customize", generations=3)
+    after = ex.ask()
+    assert len(after) == 16
+    assert [c.id for c in after[:12]] == [c.id for c in before[:12]]  # elites and best kept
+    fresh = after[12:]
+    assert all(c.origin == "hint" and c.id not in {b.id for b in before} for c in fresh)
+    for c in fresh:  # on the hints: an ivory bone and a red skin
+        bone = min(c.tf.gaussians, key=lambda g: abs(g.mean - 0.7))
+        assert abs(bone.mean - 0.7) < 0.02 and np.abs(np.subtract(bone.color, IVORY)).max() < 0.25
+    plain = GeneticExplorer(population=16, n_gaussians=5, seed=1, histogram=_histogram())
+    first = plain.ask()
+    plain.tell([c.id for c in first])
+    bred = plain.ask()
+    plain.set_stage("customize", generations=3)
+    assert [c.id for c in plain.ask()] == [c.id for c in bred]
+
+
 def test_mutation_draws_colour_and_height_toward_the_materials_hint():
     p = MutationParams(
         rate=0.0, mean_rate=0.0, mean_step=0.0, width_step=0.0, height_step=0.0,

@@ -83,6 +83,40 @@ def test_the_offline_judge_checks_each_part_in_its_own_region():
     )
 
 
+def test_a_named_part_left_out_fails_the_words_even_when_the_rest_is_clearer():
+    """Three parts named, each in its region: a picture that shows two of them perfectly and
+    drops the third (so it is simpler, which the judge's clarity rewards) loses to one that
+    shows all three in roughly the right colours (a bonsai lost its tree for a brown pot)."""
+    red, blue, green = (0.86, 0.12, 0.12), (0.2, 0.3, 0.9), (0.2, 0.75, 0.25)
+    masks = []
+    for c0 in (4, 24, 44):
+        m = np.zeros((64, 64), bool)
+        m[16:48, c0 : c0 + 16] = True
+        masks.append(m)
+    told = Intent(
+        kind="text",
+        text="red handle, blue blade and green guard",
+        part_regions=tuple(
+            PartRegion(n, c, m) for n, c, m in zip(("handle", "blade", "guard"),
+                                                  (red, blue, green), masks, strict=True)
+        ),  # fmt: skip
+    )
+
+    def paint(colours):
+        img = np.zeros((64, 64, 3), np.uint8)
+        for m, c in zip(masks, colours, strict=True):
+            if c is not None:
+                img[m] = np.asarray(c) * 255
+        return img
+
+    dull = [tuple(0.75 * np.asarray(c) + 0.1) for c in (red, blue, green)]
+    all_three = paint(dull)
+    two_of_three = paint([red, blue, None])
+    aspect = [Aspect("text_alignment", "Alignment with the description", "d")]
+    judge = MetricJudge()
+    assert judge.compare_sync(two_of_three, all_three, aspect, told).overall is Choice.SECOND
+
+
 def test_regions_are_not_part_of_what_a_model_is_asked():
     mask = np.ones((8, 8), bool)
     a = Intent(kind="text", text="red pot")

@@ -370,7 +370,11 @@ class MetricJudge:
                 parts.append(0.0 if f.coverage < 0.005 else 1.0 - min(1.0, f.opacity / 100.0))
         # Each structure the words name, in its own region: "golden leaves" and a brown pot
         # are not met by golden pot and brown leaves, though the colours are all there.
-        parts.extend(_region_colour(f, r) for r in intent.part_regions)
+        in_regions = [_region_colour(f, r) for r in intent.part_regions]
+        parts.extend(in_regions)
+        # A named part not shown in its colour at all fails the words whatever the rest does
+        # (a bonsai without its tree is clearer, and its brown pot alone outscored the tree).
+        shown = float(np.mean([s > _REGION_SHOWN for s in in_regions])) if in_regions else 1.0
         if _COLOURFUL_RE.search(text):
             parts.append(min(1.0, f.variety / 6.0))
         if _CONTRAST_RE.search(text):
@@ -385,7 +389,7 @@ class MetricJudge:
         # rendering however well its colours match the words.
         # A colour painted over the volume's box is not on any structure the words name.
         box = BOX_TEXT_PENALTY if f.quality.box else 1.0
-        return float(np.mean(parts)) * (0.3 + 0.7 * f.quality.clarity) * box
+        return float(np.mean(parts)) * (0.3 + 0.7 * f.quality.clarity) * box * shown
 
     def _ref_colour(self, f: _Features, intent: Intent) -> float | None:
         if intent.reference is None:
@@ -550,6 +554,9 @@ def _clause_presence(f: _Features, name: str, mod: str | None) -> float:
 
 #: Below this many pixels, a named structure does not show in its region.
 _REGION_MIN_PIXELS = 12
+#: A named part whose region scores at most this (:func:`_region_colour`) is not shown: the
+#: text score is scaled by the share of parts shown.
+_REGION_SHOWN = 0.02
 
 
 def _region_colour(f: _Features, region) -> float:

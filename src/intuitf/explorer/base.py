@@ -235,7 +235,8 @@ class BaseExplorer:
         A stage that freezes (refine) freezes every Gaussian but the indices ``selected`` in
         every individual; with ``base`` the population is rebuilt around that TF instead
         (it, as-is but frozen, plus variants of its selected Gaussians). Other stages
-        unfreeze everything.
+        unfreeze everything, and with material hints replace the population's last
+        ``stage_hint_share`` (bred by roulette, not elites) by fresh hinted TFs.
         """
         preset = self._resolve(stage)
         if generations is not None and int(generations) < 1:
@@ -262,6 +263,16 @@ class BaseExplorer:
             self._population = [self._retf(c, c.tf.freeze(sel)) for c in self._population]
         else:
             self._population = [self._retf(c, c.tf.unfreeze()) for c in self._population]
+            self._bring_in_hints()
+
+    def _bring_in_hints(self) -> None:
+        n = round(self._preset.stage_hint_share * len(self._population))
+        if n < 1 or not any(h.center is not None and not h.hidden for h in self.hints):
+            return
+        pop = self._population[: len(self._population) - n]
+        for _ in range(n):
+            pop.append(self._unique(self._hinted, "hint", pop))
+        self._population = pop
 
     @staticmethod
     def _retf(c: Candidate, tf: GaussianTF) -> Candidate:

@@ -51,7 +51,9 @@ class StagePreset:
     :class:`~intuitf.explorer.ga.GeneticExplorer`); the rest are bred by roulette selection,
     crossover and mutation. With material hints (what the words say about single materials:
     :mod:`intuitf.explorer.hints`), ``hint_share`` of a fresh population is placed on them
-    and a mutation makes a Gaussian follow its material's hint with ``hint_prob``.
+    and a mutation makes a Gaussian follow its material's hint with ``hint_prob``; when the
+    stage begins, ``stage_hint_share`` of the population kept from the stage before is
+    replaced by fresh hinted TFs (see :meth:`Explorer.set_stage`).
     ``pair_by_mean``: crossover pairs each
     Gaussian with the other parent's nearest one (else k-th lowest with k-th lowest).
     """
@@ -86,6 +88,7 @@ class StagePreset:
     pair_by_mean: bool = True
     hint_share: float = 0.5
     hint_prob: float = 0.1
+    stage_hint_share: float = 0.0
 
     def __post_init__(self) -> None:
         if self.aspects not in ASPECT_SETS:
@@ -167,7 +170,9 @@ INITIALIZE = StagePreset(name="initialize", aspects="quality", toggle_prob=0.06)
 #: Customization: intent aspects; rates raised again from where initialization left them
 #: (the schedule restarts), but positions barely move so the structures found are kept, and
 #: half the places go to mutated copies of the best. Colours are not reset; palette colours
-#: are tried more often. (Rates, crossover and local share tuned on the recovery benchmark's
+#: are tried more often. A quarter of the population it starts from is replaced by fresh
+#: TFs on the words' materials: initialization judged quality alone and may have dropped
+#: every TF in the asked colours before anything judged the words. (Rates, crossover and local share tuned on the recovery benchmark's
 #: engine task: benchmarks/recovery_ablation.py.)
 CUSTOMIZE = StagePreset(
     name="customize",
@@ -186,6 +191,7 @@ CUSTOMIZE = StagePreset(
     recolor_prob=0.15,
     local_share=_const(0.5),
     hint_prob=0.15,
+    stage_hint_share=0.25,
 )
 
 #: Refinement: only the selected Gaussians evolve (the rest are frozen); edit aspects.
