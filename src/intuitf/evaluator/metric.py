@@ -32,7 +32,8 @@ aspect key                     measure (higher is better unless noted)
                                each solid structure the words name, in its own region of
                                the picture (``Intent.part_regions``, from the structure map),
                                near its colour once brightened (shading kept out) and as
-                               light on its lit side;
+                               light on its lit side, the whole score times the share of
+                               those structures shown at all;
                                "colorful" / "vibrant" against colour variety; "high-contrast"
                                against contrast. A text with none of these that asks for
                                a clear view ("show its structure clearly", "details") is
