@@ -97,9 +97,9 @@ def test_a_named_part_left_out_fails_the_words_even_when_the_rest_is_clearer():
         kind="text",
         text="red handle, blue blade and green guard",
         part_regions=tuple(
-            PartRegion(n, c, m) for n, c, m in zip(("handle", "blade", "guard"),
-                                                  (red, blue, green), masks, strict=True)
-        ),  # fmt: skip
+            PartRegion(n, c, m)
+            for n, c, m in zip(("handle", "blade", "guard"), (red, blue, green), masks, strict=True)
+        ),
     )
 
     def paint(colours):

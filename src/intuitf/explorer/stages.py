@@ -172,8 +172,9 @@ INITIALIZE = StagePreset(name="initialize", aspects="quality", toggle_prob=0.06)
 #: half the places go to mutated copies of the best. Colours are not reset; palette colours
 #: are tried more often. A quarter of the population it starts from is replaced by fresh
 #: TFs on the words' materials: initialization judged quality alone and may have dropped
-#: every TF in the asked colours before anything judged the words. (Rates, crossover and local share tuned on the recovery benchmark's
-#: engine task: benchmarks/recovery_ablation.py.)
+#: every TF in the asked colours before anything judged the words. (Rates, crossover and
+#: local share tuned on the recovery benchmark's engine task:
+#: benchmarks/recovery_ablation.py.)
 CUSTOMIZE = StagePreset(
     name="customize",
     aspects="intent",
