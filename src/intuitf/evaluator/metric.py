@@ -235,6 +235,11 @@ def _resize_like(arr: np.ndarray, shape: tuple[int, int], order: int) -> np.ndar
     return out
 
 
+def _resize_mask(mask: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """A boolean mask on a picture of ``shape`` (nearest neighbour)."""
+    return _resize_like(np.asarray(mask).astype(np.float32), shape, order=0) > 0.5
+
+
 #: Differences below these count as a tie, per measure (in the measure's own units).
 _TIE_TOLERANCE = {
     "richness": 0.02,
@@ -431,8 +436,7 @@ class MetricJudge:
             return None
         de = np.linalg.norm(f.lab - stroke_lab, axis=2)
         if intent.base is not None:
-            shown = _resize_like(self.features(intent.base).fg.astype(np.float32),
-                                 f.lab.shape[:2], order=0) > 0.5  # fmt: skip
+            shown = _resize_mask(self.features(intent.base).fg, f.lab.shape[:2])
             de = np.where(shown & ~f.fg, _ABSENT_DELTA_E, de)
         keys = np.round(stroke_lab[mask] / 4.0).astype(np.int64)
         _, which = np.unique(keys, axis=0, return_inverse=True)
@@ -570,10 +574,7 @@ def _region_colour(f: _Features, region) -> float:
     over a black background: what tells a brown pot from a silver one is the colour, not how
     lit it is (as :meth:`_Features.layers`).
     """
-    mask = np.asarray(region.mask, dtype=bool)
-    if mask.shape != f.fg.shape:
-        mask = _resize_like(mask.astype(np.float32), f.fg.shape, order=0) > 0.5
-    here = mask & f.fg
+    here = _resize_mask(region.mask, f.fg.shape) & f.fg
     if f.rgb is None or int(here.sum()) < _REGION_MIN_PIXELS:
         return 0.0
     rgb = f.rgb[here].astype(np.float32) / 255.0
@@ -652,8 +653,7 @@ def _nearness(pix: np.ndarray, target: np.ndarray) -> np.ndarray:
 def _edit_region(intent: Intent, shape: tuple[int, int]) -> np.ndarray | None:
     """Where an edit should happen: the selected features' pixels, else the sketch strokes."""
     if intent.selection_mask is not None:
-        m = np.asarray(intent.selection_mask).astype(np.float32)
-        return _resize_like(m, shape, order=0) > 0.5
+        return _resize_mask(intent.selection_mask, shape)
     mask, _ = _strokes(intent, shape)
     return mask
 

@@ -265,9 +265,14 @@ class BaseExplorer:
             self._population = [self._retf(c, c.tf.unfreeze()) for c in self._population]
             self._bring_in_hints()
 
+    def _hints_placed(self) -> bool:
+        """Whether a hint sits somewhere on the values and shows (what hinted TFs are built
+        from)."""
+        return any(h.center is not None and not h.hidden for h in self.hints)
+
     def _bring_in_hints(self) -> None:
         n = round(self._preset.stage_hint_share * len(self._population))
-        if n < 1 or not any(h.center is not None and not h.hidden for h in self.hints):
+        if n < 1 or not self._hints_placed():
             return
         pop = self._population[: len(self._population) - n]
         for _ in range(n):
@@ -366,8 +371,7 @@ class BaseExplorer:
             before = len(pop)
             pop = self._fill_with_variants(pop, len(pop) + n_var, parents=made)
             made += pop[before:]
-        placed = any(h.center is not None and not h.hidden for h in self.hints)
-        n_hint = round(self._preset.hint_share * (n - len(made))) if placed else 0
+        n_hint = round(self._preset.hint_share * (n - len(made))) if self._hints_placed() else 0
         for _ in range(n_hint):
             c = self._unique(self._hinted, "hint", pop)
             pop.append(c)
