@@ -59,6 +59,7 @@ from intuitf.evaluator.metric import NAMED_COLOURS, MetricJudge
 from intuitf.evaluator.types import Intent
 from intuitf.render import Camera, VolumeRenderer
 from intuitf.session import RunSettings, Session
+from intuitf.session.views import pick_smallest
 from intuitf.testing.oracle_judge import OracleJudge
 from intuitf.tf.defaults import default_tf
 from intuitf.volume import Volume, load_volume
@@ -515,12 +516,17 @@ def run_refine(scene: Scene, judge_kind: str, args, seed: int) -> dict:
     )
     _, base_tf, _ = _run(scene, Intent(kind="text", text=bonsai.intent), judge,
                          _settings(args, seed))  # fmt: skip
-    # Clicking the pot selects the features that show it: the Gaussians that give its visible
-    # pixels at least a fifth of their opacity (the renderer's per-Gaussian attribution).
+    # A click on the pot, as in the web app: at the pot's visible pixel nearest its centre,
+    # the paper's rule (session.views.pick_smallest) selects the visible feature of smallest
+    # projected area there.
     mask, _ = visible(scene, base_tf, "pot")
-    attr = scene.renderer("all").sample_cache(scene.camera).attribution(base_tf)
-    share = attr[:, mask].sum(axis=1) / max(float(attr[:, mask].sum()), 1e-9)
-    sel = tuple(int(i) for i in np.flatnonzero(share >= 0.2)) if mask.any() else ()
+    sel: tuple[int, ...] = ()
+    if mask.any():
+        ys, xs = np.nonzero(mask)
+        k = int(np.argmin((ys - ys.mean()) ** 2 + (xs - xs.mean()) ** 2))
+        attr = scene.renderer("all").sample_cache(scene.camera).attribution(base_tf)
+        pick = pick_smallest(attr, int(xs[k]), int(ys[k]))
+        sel = () if pick.index is None else (pick.index,)
     if not sel:
         return {"case": "refine-pot", "judge": judge_kind, "seed": seed, "skipped":
                 "no Gaussian of the base shows the pot"}  # fmt: skip

@@ -96,6 +96,32 @@ def test_metric_judge_measures_the_edit_in_the_selection():
     )
 
 
+def test_transparent_is_done_once_see_through_and_then_the_rest_decides():
+    # The selected crown fades: to under half its contrast with the background (see-through),
+    # or to nothing while the skin next to it, which shares its values, fades too.
+    base, mask, _, _ = _edit_pictures()
+    see_through = base.copy()
+    see_through[mask] = (106, 103, 97)
+    wiped = base.copy()
+    wiped[mask] = 0
+    wiped[disk(0.4) & ~disk(0.2, 0.6, 0.6)] = (60, 20, 20)
+    edit = aspects_for("edit")
+    j = MetricJudge()
+    fade = Intent(kind="edit", text="transparent", base=base, selection_mask=mask)
+    v = asyncio.run(j.compare(see_through, wiped, edit, fade))
+    assert v.per_aspect["edit_instruction_alignment"] is Choice.TIE
+    assert v.overall is Choice.FIRST
+    # Short of see-through, fading further still counts.
+    faint = base.copy()
+    faint[mask] = (190, 186, 175)
+    v = asyncio.run(j.compare(faint, see_through, edit, fade))
+    assert v.per_aspect["edit_instruction_alignment"] is Choice.SECOND
+    # "hide" asks for it gone: all the way counts.
+    hide = Intent(kind="edit", text="hide it", base=base, selection_mask=mask)
+    v = asyncio.run(j.compare(see_through, wiped, edit, hide))
+    assert v.per_aspect["edit_instruction_alignment"] is Choice.SECOND
+
+
 def test_the_selection_is_part_of_the_intent_fingerprint():
     base, mask, _, _ = _edit_pictures()
     a = Intent(kind="edit", text="gold", base=base, selection_mask=mask)

@@ -16,7 +16,7 @@ from intuitf.session import RunSpec, RunStore, Session
 from intuitf.session.events import read_events
 from intuitf.session.scheduler import BATCH, INTERACTIVE, RenderScheduler
 from intuitf.session.spec import parse_spec
-from intuitf.session.views import pick_smallest
+from intuitf.session.views import PICK_SHARE, pick_smallest
 from intuitf.volume import phantom
 
 SETTINGS = {"population": 6, "generations": 3, "image_size": 48, "output_size": 48, "top_k": 2}
@@ -288,6 +288,21 @@ def test_pick_chooses_the_visible_feature_of_smallest_area():
     assert pick_smallest(np.zeros((2, 4, 4), np.float32), 1, 1).index is None
 
 
+def test_a_speck_tinting_the_pixel_does_not_take_the_click():
+    # A pot (large) under the cursor, with a few pixels of bright noise in front of it that
+    # give the pixel 6 % of its opacity: the click selects the pot, not the speck.
+    attr = np.zeros((3, 8, 8), dtype=np.float32)
+    attr[0] = 0.2  # soil and trunk, everywhere
+    attr[1, 2:6, 2:6] = 0.7  # the pot
+    attr[2, 3, 3] = 0.06  # the speck: visible, but a small part of the pixel
+    picked = pick_smallest(attr, x=3, y=3)
+    assert picked.index == 1
+    assert [v[0] for v in picked.visible] == [2, 1, 0]  # still listed as visible there
+    # Where the speck is most of what the pixel shows, it is what the click means.
+    attr[2, 3, 3] = 0.5
+    assert pick_smallest(attr, x=3, y=3).index == 2
+
+
 def test_views_leave_the_judging_camera_and_images_alone(vol):
     from intuitf.render import Camera
 
@@ -301,8 +316,9 @@ def test_views_leave_the_judging_camera_and_images_alone(vol):
     p = s.pick(cid, Camera(azimuth=90, elevation=10), x=24, y=24, size=48)
     feats = s.features(cid, Camera(azimuth=90, elevation=10), size=48)
     assert len(feats) == len(s.tfs[cid])
-    if p.index is not None:
-        areas = {i: a for i, _, a in p.visible}
+    if p.index is not None:  # the smallest of the features that make the pixel
+        total = sum(share for _, share, _ in p.visible)
+        areas = {i: a for i, share, a in p.visible if share >= PICK_SHARE * total}
         assert areas[p.index] == min(areas.values())
     assert s.camera == camera and np.array_equal(s.image(cid, s.tfs[cid]), judged)
 

@@ -482,9 +482,12 @@ class MetricJudge:
                 parts.append(_colour_closeness(f.lab[region], names[0]))
         direction = _opacity_direction(text)
         if direction and base is not None:
-            now = np.linalg.norm(f.lab[region] - f.bg_lab, axis=1).mean()
-            before = np.linalg.norm(base[region] - f.bg_lab, axis=1).mean()
-            parts.append(0.5 + 0.5 * float(np.tanh(direction * (now - before) / 20.0)))
+            now = float(np.linalg.norm(f.lab[region] - f.bg_lab, axis=1).mean())
+            before = float(np.linalg.norm(base[region] - f.bg_lab, axis=1).mean())
+            if direction < 0:
+                parts.append(_fading(before, now, hide=bool(_HIDE_RE.search(text.lower()))))
+            else:
+                parts.append(0.5 + 0.5 * float(np.tanh((now - before) / 20.0)))
         if parts:
             return float(np.mean(parts))
         if mask is None or base is None:
@@ -679,6 +682,27 @@ _LESS_OPAQUE_RE = re.compile(
     r"transparent|translucent|faint(er)?|fade\w*|subtle|thinner|weaker|hide|hidden|remove|"
     r"invisible|see[- ]through)\b"
 )
+
+
+#: Words asking for the selection to be gone, not merely see-through.
+_HIDE_RE = re.compile(r"\b(hide|hidden|remove\w*|invisible|delete\w*|gone)\b")
+
+#: Share of the selection's contrast with the background that "transparent" or "fainter"
+#: takes away before the edit counts as done: half of it leaves a see-through layer, and
+#: beyond that a change is no better (so keeping the rest as it was decides, and what
+#: shares the selection's values is not thrown away with it).
+FADE_DONE = 0.5
+
+
+def _fading(before: float, now: float, *, hide: bool) -> float:
+    """How far the selection faded toward the background, in [0, 1] (0.5: unchanged).
+
+    ``before`` and ``now`` are the region's mean CIELAB distance from the background in the
+    base and in the candidate. "hide" counts up to the whole distance; the other fading
+    words up to :data:`FADE_DONE` of it. A region that grew stronger scores below 0.5.
+    """
+    span = max(before, 5.0) * (1.0 if hide else FADE_DONE)
+    return 0.5 + 0.5 * float(np.clip((before - now) / span, -1.0, 1.0))
 
 
 def _opacity_direction(text: str) -> int:

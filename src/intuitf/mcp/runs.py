@@ -465,7 +465,7 @@ class RunDesk:
 
     async def select(self, candidate, *, x, y, index, camera, size, shaded, clear) -> Reply:
         """Select a feature of a candidate by picture coordinates (the paper's rule: of the
-        features visible at the pixel, the one with the smallest projected area) or by index."""
+        features that make the pixel, the one with the smallest projected area) or by index."""
         from intuitf.mcp.camera import describe as describe_camera
         from intuitf.mcp.pictures import outline, side_by_side
         from intuitf.mcp.service import Picture

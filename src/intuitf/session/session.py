@@ -615,7 +615,8 @@ class Session:
         size: int = 256,
         shaded: bool | None = None,
     ) -> PickResult:
-        """The feature under pixel (x, y) of the view: the visible one of smallest area.
+        """The feature under pixel (x, y) of the view: of those that make the pixel (see
+        :func:`~intuitf.session.views.pick_smallest`), the one of smallest projected area.
 
         Returns a :class:`~intuitf.session.views.PickResult`.
         """

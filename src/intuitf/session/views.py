@@ -28,6 +28,10 @@ if TYPE_CHECKING:
 
 #: A feature counts as visible at a pixel when it holds at least this share of its opacity.
 VISIBLE_SHARE = 0.02
+#: ... and as under the cursor, for a pick, when it holds at least this part of the opacity
+#: the pixel has: a speck that tints a pixel a little (a few pixels of bright noise in front
+#: of a pot) would otherwise always be the smallest feature there and take every click.
+PICK_SHARE = 0.15
 
 
 @dataclass(frozen=True)
@@ -119,8 +123,12 @@ class ViewRenderer:
 
 
 def pick_smallest(attribution: np.ndarray, x: int, y: int) -> PickResult:
-    """The paper's rule over an attribution map (N, H, W): of the features visible at (x, y),
-    the one whose projected area (pixels where it is visible) is smallest."""
+    """The paper's rule over an attribution map (N, H, W): of the features under (x, y), the
+    one whose projected area (pixels where it is visible) is smallest.
+
+    Under the pixel means visible there (:data:`VISIBLE_SHARE`) and holding at least
+    :data:`PICK_SHARE` of the pixel's opacity; ``visible`` still lists every visible one.
+    """
     visible_map = attribution >= VISIBLE_SHARE
     areas = visible_map.reshape(len(attribution), -1).sum(axis=1)
     here = [int(i) for i in np.flatnonzero(visible_map[:, y, x])]
@@ -132,5 +140,6 @@ def pick_smallest(attribution: np.ndarray, x: int, y: int) -> PickResult:
     )
     if not visible:
         return PickResult(None, (), None)
-    chosen = visible[0][0]
+    total = float(sum(share for _, share, _ in visible))
+    chosen = next(i for i, share, _ in visible if share >= PICK_SHARE * total)
     return PickResult(chosen, visible, visible_map[chosen].copy())

@@ -475,11 +475,13 @@ export class GLVolumeRenderer {
 
 /** A feature counts as visible at a pixel with at least this share (session/views.py). */
 export const VISIBLE_SHARE = 0.02;
+/** ... and as under the cursor with at least this part of the pixel's opacity (PICK_SHARE). */
+export const PICK_SHARE = 0.15;
 
 /**
- * The paper's rule over an attribution (N × H × W): of the features visible at (x, y), the one
- * with the smallest projected area. {index, visible: [[i, share, area]], mask} as the server's
- * pick_smallest; mask is a Uint8Array (H × W) of the chosen feature's pixels.
+ * The paper's rule over an attribution (N × H × W): of the features under (x, y) (visible there
+ * and holding PICK_SHARE of the pixel's opacity), the one with the smallest projected area.
+ * {index, visible: [[i, share, area]], mask} as the server's pick_smallest; mask is a Uint8Array (H × W) of the chosen feature's pixels.
  */
 export function pickSmallest(attr, n, width, height, x, y) {
   const size = width * height;
@@ -494,7 +496,8 @@ export function pickSmallest(attr, n, width, height, x, y) {
   }
   visible.sort((a, b) => a[2] - b[2] || b[1] - a[1] || a[0] - b[0]);
   if (!visible.length) return { index: null, visible: [], mask: null };
-  const chosen = visible[0][0];
+  const total = visible.reduce((s, v) => s + v[1], 0);
+  const chosen = visible.find((v) => v[1] >= PICK_SHARE * total)[0];
   return { index: chosen, visible, mask: featureMask(attr, [chosen], width, height) };
 }
 

@@ -7,8 +7,8 @@
 // Drag rotates (azimuth, elevation); shift-drag or right-drag pans; the wheel zooms. While
 // dragging the server sends small JPEG frames, on release one full PNG; only the newest
 // request is ever rendered (one frame in flight, the latest camera waiting). A click without a
-// drag picks the feature under the cursor (the smallest projected area among those visible
-// there): its outline is drawn at once and it is selected in the decomposition view.
+// drag picks the feature under the cursor (the smallest projected area among those that make
+// the pixel): its outline is drawn at once and it is selected in the decomposition view.
 
 import * as api from "./api.js";
 import * as glv from "./gl_view.js";
