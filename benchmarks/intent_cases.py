@@ -25,11 +25,12 @@ structure:
 
 Judges: ``metric`` (the built-in MetricJudge) and ``oracle`` (a labelling oracle: the fake
 model server names the structures from the label volumes, 10 % of the names wrong, and in each
-pair prefers the picture whose labelled structures are closer to the asked colours and with less
-haze, wrong 10 % of the time). Cases:
+pair the oracle prefers the candidate that scores better on this script's own measures, its
+named structures' ΔE, looks and haze, wrong 10 % of the time: what the search reaches with a
+judge that recognises every structure). Cases:
 
     bonsai       "A potted tree with brown pot, silver branch and golden leaves"
-    refine-pot   the bonsai's best, its pot's Gaussians selected, "transparent"
+    refine-pot   the bonsai's best, a click on its pot (the web app's pick), "transparent"
     tooth-sketch red stroke on the crown top, yellow on the crown middle, blue on the root
     foot-chest   the foot (ivory bone, faint red skin) as the reference for the chest
     foot-head    ... and for the head
@@ -311,34 +312,50 @@ def label_tf_bound(scene: Scene, asked: dict[str, tuple]) -> dict:
     return best[1]
 
 
-def label_oracle(scene: Scene, asked: dict[str, tuple], noise: float, seed: int) -> OracleJudge:
-    """A judge that knows the labels: prefers the picture whose structures' footprints are
-    closer to the asked colours, with less haze (wrong ``noise`` of the time)."""
-    # Footprints: where each named structure would show with every structure opaque,
-    # later (inner, denser) structures in front.
-    from intuitf.tf import Gaussian, GaussianTF
+class LabelOracle(OracleJudge):
+    """A judge that knows the labels: in each pair it prefers the candidate that scores higher
+    on ``score_tf`` (wrong ``noise`` of the time). It stands for a model that recognises every
+    structure in the pictures.
 
-    probe = GaussianTF((Gaussian(0.55, 0.5, 1.0, (1.0, 1.0, 1.0)),))
-    names = list(asked)
-    fps = {n: scene.alpha(probe, "+" + n) > 0.3 for n in names}
-    air = ~np.logical_or.reduce(list(fps.values()))
-    targets = {
-        n: (c if isinstance(c, np.ndarray) else colour_lab(c)) for n, (c, _) in asked.items()
-    }
+    It judges by this script's own measures on the candidate's TF, which it finds from the
+    picture it is shown through :meth:`follow` (the run's candidates), so what it prefers is
+    what the table scores: the table's oracle rows are what the search reaches with a
+    near-perfect judge. A picture it cannot trace to a TF (none in these runs) scores lowest.
+    """
 
-    def score(img: np.ndarray) -> float:
-        lab = _lab(img)
-        s = 0.0
-        for n in names:
-            m = fps[n]
-            if m.sum() == 0:
-                continue
-            mean = lab[m].mean(axis=0)
-            s -= float(deltaE_ciede2000(mean[None], targets[n][None])[0])
-        s -= 200.0 * float((lab[air][:, 0] > 8.0).mean()) if air.any() else 0.0
-        return s
+    def __init__(self, score_tf, noise: float, seed: int) -> None:
+        super().__init__(self._score_picture, noise=noise, seed=seed)
+        self.score_tf = score_tf
+        self._session: Session | None = None
+        self._tf_by_picture: dict[bytes, object] = {}
 
-    return OracleJudge(score, noise=noise, seed=seed)
+    def follow(self, session: Session) -> None:
+        """Judge the candidates of ``session`` (the pictures it asks about are its own)."""
+        self._session, self._tf_by_picture = session, {}
+
+    def _tf_of(self, img: np.ndarray):
+        key = np.ascontiguousarray(img).tobytes()
+        if key not in self._tf_by_picture and self._session is not None:
+            for cid, tf in self._session.tfs.items():
+                self._tf_by_picture[self._session.image(cid, tf).tobytes()] = tf
+        return self._tf_by_picture.get(key)
+
+    def _score_picture(self, img: np.ndarray) -> float:
+        tf = self._tf_of(img)
+        return -1e9 if tf is None else float(self.score_tf(tf))
+
+
+def label_oracle(scene: Scene, asked: dict[str, tuple], noise: float, seed: int) -> LabelOracle:
+    """The labelling oracle of a case: the named structures' mean ΔE, 20 for each look the
+    words do not get, and the haze (a share, times 200), the less the better."""
+
+    def score(tf) -> float:
+        m = measure(scene, tf, asked)
+        s = m["structures"].values()
+        return (-float(np.mean([x["dE"] for x in s])) - 20.0 * sum(not x["opacity_ok"] for x in s)
+                - 200.0 * m["haze"])  # fmt: skip
+
+    return LabelOracle(score, noise, seed)
 
 
 # -- cases ---------------------------------------------------------------------------------------
@@ -395,6 +412,8 @@ def _run(scene: Scene, intent: Intent, judge, settings: RunSettings, initial=())
                               judge=judge, settings=settings)  # fmt: skip
     else:
         sess = Session.create(scene.vol, intent=intent, judge=judge, settings=settings)
+    if isinstance(judge, LabelOracle):
+        judge.follow(sess)
     firsts, bests = None, None
     undecided = []
     while not sess.done:
@@ -516,16 +535,18 @@ def run_refine(scene: Scene, judge_kind: str, args, seed: int) -> dict:
     )
     _, base_tf, _ = _run(scene, Intent(kind="text", text=bonsai.intent), judge,
                          _settings(args, seed))  # fmt: skip
-    # A click on the pot, as in the web app: at the pot's visible pixel nearest its centre,
-    # the paper's rule (session.views.pick_smallest) selects the visible feature of smallest
-    # projected area there.
+    # A click on the pot, as in the web app: where the pot shows most (the pixel that changes
+    # most without it, inside its visible area, away from its rim), the paper's rule
+    # (session.views.pick_smallest) selects the feature of smallest projected area there.
     mask, _ = visible(scene, base_tf, "pot")
+    inner = ndimage.binary_erosion(mask, iterations=1)
     sel: tuple[int, ...] = ()
-    if mask.any():
-        ys, xs = np.nonzero(mask)
-        k = int(np.argmin((ys - ys.mean()) ** 2 + (xs - xs.mean()) ** 2))
+    if inner.any():
+        shown = np.linalg.norm(_lab(scene.image(base_tf)) - _lab(scene.image(base_tf, "-pot")),
+                               axis=2)  # fmt: skip
+        y, x = np.unravel_index(int(np.argmax(np.where(inner, shown, -1.0))), mask.shape)
         attr = scene.renderer("all").sample_cache(scene.camera).attribution(base_tf)
-        pick = pick_smallest(attr, int(xs[k]), int(ys[k]))
+        pick = pick_smallest(attr, int(x), int(y))
         sel = () if pick.index is None else (pick.index,)
     if not sel:
         return {"case": "refine-pot", "judge": judge_kind, "seed": seed, "skipped":
@@ -554,18 +575,20 @@ def _pot_opacity(scene: Scene, tf) -> float:
     return voxel_opacity(scene, tf, "pot")
 
 
-def _refine_oracle(scene: Scene, base_tf, seed: int) -> OracleJudge:
-    """Prefers a fainter pot with the rest unchanged (from the picture alone)."""
-    base = _lab(scene.image(base_tf))
-    mask, _ = visible(scene, base_tf, "pot")
+def _refine_oracle(scene: Scene, base_tf, seed: int) -> LabelOracle:
+    """Prefers a pot down to a quarter of its opacity or less, then the rest unchanged."""
+    before = max(_pot_opacity(scene, base_tf), 1e-6)
+    base_lab = _lab(scene.image(base_tf))
+    mask_b, _ = visible(scene, base_tf, "pot")
 
-    def score(img):
-        lab = _lab(img)
-        inside = float(lab[mask][:, 0].mean()) if mask.any() else 0.0
-        outside = float(np.linalg.norm(lab[~mask] - base[~mask], axis=1).mean())
-        return -inside - 3.0 * outside
+    def score(tf) -> float:
+        mask_a, _ = visible(scene, tf, "pot")
+        outside = ~(mask_b | mask_a)
+        de = deltaE_ciede2000(base_lab[outside], _lab(scene.image(tf))[outside])
+        ratio = _pot_opacity(scene, tf) / before
+        return -20.0 * max(0.0, ratio - 0.25) - (float(de.mean()) if de.size else 0.0)
 
-    return OracleJudge(score, noise=0.1, seed=seed)
+    return LabelOracle(score, noise=0.1, seed=seed)
 
 
 # -- table ---------------------------------------------------------------------------------------
