@@ -40,6 +40,9 @@ def test_the_three_case_studies(tmp_path):
     assert seen["undo_disabled"] is True
     assert seen["volume_held"] is True
     assert seen["refine_intent"] == "edit"
+    assert seen["head_spacing"] == [1, 1, 2]  # set in the volume bar before the head's run
+    sx, _, sz = seen["page_spacing"]  # the page's view took it too (a downsampled copy's
+    assert 1.9 < sz / sx < 2.1  # voxels are larger, in nearly the same proportion)
     assert seen["export_name"].endswith(".tf.json") and seen["export_menu_open"] is False
     assert seen["deleted"] is True
     assert seen["sketch_intent"] == "sketch"

@@ -334,6 +334,22 @@ def walk(browser, server: Server, out: Path) -> dict:
     ref = out / "3-foot-reference-input.png"
     ref.write_bytes(server.get_bytes(f"/api/candidates/{qid}/image?size=256"))
     choose_volume(page, "ctheadstanford")
+    # The raw file has no voxel size: its slices are 2 mm apart, its pixels about 1 mm
+    # (MANIFEST.md), set in the volume bar as a user would.
+    page.fill("#volume-spacing", "1,1,2")
+    page.dispatch_event("#volume-spacing", "change")
+    page.wait_for_function(
+        "() => (window.intuitfDebug.state.volumes.find("
+        "v => v.id === window.intuitfDebug.state.volumeId) || {}).spacing?.[2] === 2"
+    )
+    seen["head_spacing"] = next(v["spacing"] for v in server.api("GET", "/api/volumes")
+                                if v["id"].startswith("ctheadstanford"))  # fmt: skip
+    # The page's own copy of the volume follows: loaded again with that voxel size.
+    page.wait_for_function(
+        "() => window.intuitfDebug.gl.ready(window.intuitfDebug.state.volumeId, '1,1,2')",
+        timeout=60_000,
+    )
+    seen["page_spacing"] = page.evaluate("() => window.intuitfDebug.gl.renderer().volume.spacing")
     settle_view(page)
     page.click("#query .seg-kind button[data-kind=image]")
     page.set_input_files("#q-ref", str(ref))

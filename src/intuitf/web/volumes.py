@@ -84,6 +84,12 @@ def _shape_from_name(name: str) -> tuple[list[int] | None, str | None]:
     return [int(m.group(1)), int(m.group(2)), int(m.group(3))], m.group(4).lower()
 
 
+def _loaded_key(entry: VolumeEntry) -> str:
+    """The key of an entry's loaded volume: its id and the options it was read with, so that
+    a load still going when the options change (a new spacing) is never taken for the new one."""
+    return entry.id + "|" + json.dumps(entry.options, sort_keys=True, default=str)
+
+
 class VolumeCatalog:
     """Volumes by id, loaded on demand (thread-safe)."""
 
@@ -145,8 +151,7 @@ class VolumeCatalog:
                 entry.options.pop("spacing", None)
             else:
                 entry.options["spacing"] = spacing
-            self._loaded.pop(entry.id, None)
-            self._histograms.pop(entry.id, None)
+            self._forget(entry.id)
         return entry
 
     def _add(self, entry: VolumeEntry) -> VolumeEntry:
@@ -214,7 +219,9 @@ class VolumeCatalog:
     def load(self, volume_id: str):
         """The loaded volume (blocking: call it from a worker thread)."""
         entry = self.get(volume_id)
-        return self._load_key(entry.id, lambda: entry.spec().load(), entry)
+        with self._lock:
+            key, spec = _loaded_key(entry), entry.spec()
+        return self._load_key(key, spec.load, entry)
 
     def load_spec(self, spec):
         """The volume of a run's :class:`VolumeSpec` (shared with the catalog's when the same)."""
@@ -245,6 +252,14 @@ class VolumeCatalog:
                         entry.shape = list(vol.dims)
                         entry.dtype = str(vol.original_dtype)
         return vol
+
+    def _forget(self, volume_id: str) -> None:
+        """Drop what was loaded or computed for a volume (under the lock): its voxels, and
+        what a new voxel size changes (the preview camera frames the box)."""
+        for key in [k for k in self._loaded if k.split("|", 1)[0] == volume_id]:
+            del self._loaded[key]
+        for store in (self._histograms, self._structures, self._cameras):
+            store.pop(volume_id, None)
 
     def _kept(self, store: dict, volume_id: str, build: Callable[[], Any]) -> Any:
         """``store[volume_id]``, built by ``build()`` (outside the lock) the first time."""
@@ -335,8 +350,7 @@ class VolumeCatalog:
         with self._lock:
             Path(entry.source).unlink(missing_ok=True)
             self._entries.pop(entry.id, None)
-            self._loaded.pop(entry.id, None)
-            self._histograms.pop(entry.id, None)
+            self._forget(entry.id)
 
     def save_upload(self, filename: str, data: bytes) -> VolumeEntry:
         """Keep an uploaded volume file and check that it loads (blocking).
@@ -378,6 +392,6 @@ class VolumeCatalog:
             ) from None
         entry = self._add_file(target.resolve(), "upload")
         with self._lock:
-            self._loaded[entry.id] = vol
+            self._loaded[_loaded_key(entry)] = vol
             entry.shape, entry.dtype = list(vol.dims), str(vol.original_dtype)
         return entry

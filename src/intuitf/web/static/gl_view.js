@@ -16,7 +16,7 @@ const DRAG_SCALES = [1, 0.75, 0.5, 0.375, 0.25];
 
 let R = null;
 let problem = null;
-let vol = { id: null, status: "none", note: "", started: 0 };
+let vol = { id: null, variant: "", status: "none", note: "", started: 0 };
 let ticket = 0;
 let callbacks = { onReady: () => {}, onNote: () => {} };
 let dragLevel = 0;
@@ -49,7 +49,7 @@ function lost(e) {
   e.preventDefault();
   problem = "The page's WebGL2 context was lost: the server renders the view.";
   R = null;
-  vol = { id: null, status: "none", note: "", started: 0 };
+  vol = { id: null, variant: "", status: "none", note: "", started: 0 };
   callbacks.onNote(problem);
 }
 
@@ -57,12 +57,16 @@ export function renderer() {
   return R;
 }
 
-/** "ready", "loading", "failed" or "none" for volume `id`; starts loading a new one. */
-export function ensureVolume(id) {
+/**
+ * "ready", "loading", "failed" or "none" for volume `id`; starts loading a new one. `variant`
+ * names what else the texture depends on (the voxel size set for a raw file): a new one loads
+ * the volume again, with the size the server now gives it.
+ */
+export function ensureVolume(id, variant = "") {
   if (!R || !id) return "none";
-  if (vol.id === id) return vol.status;
+  if (vol.id === id && vol.variant === variant) return vol.status;
   const my = ++ticket;
-  vol = { id, status: "loading", note: "", started: performance.now() };
+  vol = { id, variant, status: "loading", note: "", started: performance.now() };
   callbacks.onNote(`Loading ${id} into the page…`);
   load(id, my);
   return "loading";
@@ -103,8 +107,8 @@ export function note() {
   return problem || vol.note || "";
 }
 
-export function ready(id) {
-  return !!R && vol.id === id && vol.status === "ready";
+export function ready(id, variant = "") {
+  return !!R && vol.id === id && vol.variant === variant && vol.status === "ready";
 }
 
 /**

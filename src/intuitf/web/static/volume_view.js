@@ -96,13 +96,13 @@ export function initVolumeView() {
   new ResizeObserver(() => resize()).observe(stage);
   resize();
 
-  on(["run", "current", "candidate", "draft", "shaded", "background", "selected", "volumeId", "histogram"], () =>
+  on(["run", "current", "candidate", "draft", "shaded", "background", "selected", "volumeId", "volumes", "histogram"], () =>
     frame(state.draftDragging ? "drag" : "full"),
   );
   on("camera", () => frame("full"));
   // A chosen volume starts loading into the page at once, beside its histogram.
   on("volumeId", () => {
-    if (!state.run && state.volumeId) glv.ensureVolume(state.volumeId);
+    if (!state.run && state.volumeId) glv.ensureVolume(state.volumeId, variantOf(state.volumeId));
     if (!state.run && state.volumeId) previewCamera(state.volumeId);
   });
   on(["pick", "selected", "camera"], drawOverlay);
@@ -216,7 +216,7 @@ export function frame(quality = "full") {
   stage.classList.remove("empty");
   const gt = pageTarget(t);
   if (gt) {
-    const st = glv.ensureVolume(gt.volume);
+    const st = glv.ensureVolume(gt.volume, variantOf(gt.volume));
     if (st === "ready") {
       pageFrame(quality);
       return;
@@ -241,6 +241,12 @@ export function frame(quality = "full") {
 }
 
 /** {volume, tf} when the page renders `t` itself (its volume known to the server by id), else null. */
+/** What the page's copy of volume `id` depends on besides the file: its voxel size. */
+function variantOf(id) {
+  const v = state.volumes.find((x) => x.id === id);
+  return v && v.spacing ? v.spacing.join(",") : "";
+}
+
 function pageTarget(t) {
   if (!glv.renderer() || !t) return null;
   if (t.volume) return { volume: t.volume, tf: t.tf };
@@ -263,7 +269,7 @@ function drawPageFrame() {
   const quality = glPending || "full";
   glPending = null;
   const gt = pageTarget(target());
-  if (!gt || !glv.ready(gt.volume)) return frame(quality);
+  if (!gt || !glv.ready(gt.volume, variantOf(gt.volume))) return frame(quality);
   const camera = cameraJSON();
   const my = ++bandTicket; // a newer frame stops an older one drawn in bands
   const opts = { tf: gt.tf, camera, size: viewSize, shading: state.shaded, background: hexToRgb(state.background), quality };
@@ -297,7 +303,7 @@ function pageFrameDone(res, quality, gt, camera) {
     prepareTimer = setTimeout(() => {
       const now = pageTarget(target());
       const pickable = (splitQid(state.current) || (!state.run && now && target().volume)) && !state.draft;
-      if (glPending === null && !drag && now && pickable && glv.ready(now.volume)) glv.prepare(now.tf, cameraJSON(), viewSize);
+      if (glPending === null && !drag && now && pickable && glv.ready(now.volume, variantOf(now.volume))) glv.prepare(now.tf, cameraJSON(), viewSize);
     }, 200);
   }
 }
@@ -440,7 +446,7 @@ async function pickAt(e, add) {
   const camera = cameraJSON();
   const was = state.current;
   const gt = pageTarget(t);
-  if (gt && glv.ready(gt.volume) && glv.canPick()) {
+  if (gt && glv.ready(gt.volume, variantOf(gt.volume)) && glv.canPick()) {
     // The page's own pick: an attribution pass on the GPU and the smallest-area rule.
     clickStart = performance.now();
     const res = glv.pick(gt.tf, camera, viewSize, x, y);
@@ -508,7 +514,7 @@ async function maskPixels(uri, size) {
 /** The selection's pixels from the page's attribution pass: {bits, index} or null. */
 function pageSelection() {
   const gt = pageTarget(target());
-  if (!gt || !glv.ready(gt.volume) || !glv.canPick() || state.draft || !state.selected.size) return null;
+  if (!gt || !glv.ready(gt.volume, variantOf(gt.volume)) || !glv.canPick() || state.draft || !state.selected.size) return null;
   const indices = [...state.selected].sort((a, b) => a - b);
   const bits = glv.selectionMask(gt.tf, cameraJSON(), viewSize, indices);
   return bits ? { bits, index: indices.join(",") } : null;
@@ -517,7 +523,8 @@ function pageSelection() {
 async function drawOverlay() {
   const p = state.pick;
   const mctx = maskCanvas.getContext("2d");
-  if (pageTarget(target()) && glv.canPick() && glv.ready(pageTarget(target()).volume)) {
+  const pt = pageTarget(target());
+  if (pt && glv.canPick() && glv.ready(pt.volume, variantOf(pt.volume))) {
     // Drawn by the page: the selected features' outline, for the camera on view (none while
     // the camera moves; the frame after it stops brings it back).
     const sel = drag && drag.moved ? null : pageSelection();
