@@ -74,3 +74,16 @@ def test_real_bonsai_stands_along_y_and_its_words_land():
     from intuitf.intent.hints import structure_map_of
 
     assert structure_map_of(vol).up_axis == 1  # the tree grows along +y in this scan
+
+
+@pytest.mark.skipif(not (DATA / "bonsai_256x256x256_uint8.raw.gz").exists(), reason="no data")
+def test_the_branch_is_the_trunk_not_the_soil_the_pot_encloses():
+    from intuitf.volume import load_volume
+
+    # At 64³ the soil in the pot (0.48-0.69) is one branching piece, larger than the trunk
+    # (0.29-0.46): the word "branch" goes to the one standing in the open.
+    vol = load_volume(DATA / "bonsai_256x256x256_uint8.raw.gz", max_dim=64)
+    th = intent_hints(Intent(kind="text", text="brown pot, silver branch, golden leaves"), vol)
+    by = {h.material: h for h in th.hints}
+    assert 0.27 < by["branch"].center < 0.47
+    assert by["pot"].center > 0.72 and by["leaves"].center < 0.27
