@@ -245,6 +245,7 @@ def test_case_study_text_query_select_refine_branch_overrule(page, web_server, s
         "run => (window.intuitfDebug.state.current || '').startsWith(run + '/g000-')", arg=run
     )
     g0 = current(page)
+    assert page.inner_text("#pick-info") == ""  # the last click's note went with its result
     page.fill("#q-text", "")
     page.click("#branch-btn")
     page.wait_for_function(

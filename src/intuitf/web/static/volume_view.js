@@ -11,6 +11,7 @@
 // the pixel): its outline is drawn at once and it is selected in the decomposition view.
 
 import * as api from "./api.js";
+import { PICK_SHARE } from "./gl_renderer.js";
 import * as glv from "./gl_view.js";
 import { showError, showMessage } from "./messages.js";
 import {
@@ -106,6 +107,11 @@ export function initVolumeView() {
     if (!state.run && state.volumeId) previewCamera(state.volumeId);
   });
   on(["pick", "selected", "camera"], drawOverlay);
+  // The last click's note goes with it (another result, run or volume; a cleared selection).
+  on(["pick", "selected"], () => {
+    const p = state.pick;
+    if (!p || (p.index !== null && p.index !== undefined && !state.selected.size)) pickInfo.textContent = "";
+  });
   on(["current", "draft", "run", "volumeId", "histogram"], updateTitle);
   on("runDetail", () => {
     // A run's judging camera is where its pictures (and a sketch's base) come from.
@@ -486,8 +492,12 @@ function applyPick(res, { camera, x, y, add }) {
       selected = new Set(add ? state.selected : []);
       if (add && state.selected.has(res.index)) selected.delete(res.index);
       else selected.add(res.index);
-      const n = (res.visible || []).length;
-      pickInfo.textContent = `Selected feature ${res.index + 1}${n > 1 ? ` (the smallest of ${n} visible here)` : ""}.`;
+      // The pick's candidates: the features that make the pixel (a speck that only tints it
+      // is visible there but was not in the running).
+      const vis = res.visible || [];
+      const total = vis.reduce((sum, v) => sum + v[1], 0);
+      const n = vis.filter((v) => v[1] >= PICK_SHARE * total).length;
+      pickInfo.textContent = `Selected feature ${res.index + 1}${n > 1 ? ` (the smallest of the ${n} that make this pixel)` : ""}.`;
     }
     set({ pick: { ...res, camera, size: viewSize, x, y }, selected });
   }
