@@ -481,7 +481,8 @@ export const PICK_SHARE = 0.15;
 /**
  * The paper's rule over an attribution (N × H × W): of the features under (x, y) (visible there
  * and holding PICK_SHARE of the pixel's opacity), the one with the smallest projected area.
- * {index, visible: [[i, share, area]], mask} as the server's pick_smallest; mask is a Uint8Array (H × W) of the chosen feature's pixels.
+ * {index, visible: [[i, share, area]], mask} as the server's pick_smallest; mask is a
+ * Uint8Array (H × W) of the chosen feature's pixels.
  */
 export function pickSmallest(attr, n, width, height, x, y) {
   const size = width * height;

@@ -246,13 +246,13 @@ export function frame(quality = "full") {
   socket.request(msg);
 }
 
-/** {volume, tf} when the page renders `t` itself (its volume known to the server by id), else null. */
 /** What the page's copy of volume `id` depends on besides the file: its voxel size. */
 function variantOf(id) {
   const v = state.volumes.find((x) => x.id === id);
   return v && v.spacing ? v.spacing.join(",") : "";
 }
 
+/** {volume, tf} when the page renders `t` itself (its volume known to the server by id), else null. */
 function pageTarget(t) {
   if (!glv.renderer() || !t) return null;
   if (t.volume) return { volume: t.volume, tf: t.tf };
