@@ -301,6 +301,13 @@ def test_a_speck_tinting_the_pixel_does_not_take_the_click():
     # Where the speck is most of what the pixel shows, it is what the click means.
     attr[2, 3, 3] = 0.5
     assert pick_smallest(attr, x=3, y=3).index == 2
+    # Where eight features each make an eighth of the pixel, none reaches the bar: the
+    # largest share still competes, so the smallest of those is picked.
+    many = np.zeros((8, 8, 8), dtype=np.float32)
+    for i in range(8):
+        many[i, : i + 1] = 0.1  # feature i covers i + 1 rows: feature 0 is the smallest
+    many[3, 0, 0] = 0.12
+    assert pick_smallest(many, x=0, y=0).index == 3
 
 
 def test_views_leave_the_judging_camera_and_images_alone(vol):
@@ -318,7 +325,8 @@ def test_views_leave_the_judging_camera_and_images_alone(vol):
     assert len(feats) == len(s.tfs[cid])
     if p.index is not None:  # the smallest of the features that make the pixel
         total = sum(share for _, share, _ in p.visible)
-        areas = {i: a for i, share, a in p.visible if share >= PICK_SHARE * total}
+        bar = min(PICK_SHARE * total, max(share for _, share, _ in p.visible))
+        areas = {i: a for i, share, a in p.visible if share >= bar}
         assert areas[p.index] == min(areas.values())
     assert s.camera == camera and np.array_equal(s.image(cid, s.tfs[cid]), judged)
 

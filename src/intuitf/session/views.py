@@ -127,7 +127,8 @@ def pick_smallest(attribution: np.ndarray, x: int, y: int) -> PickResult:
     one whose projected area (pixels where it is visible) is smallest.
 
     Under the pixel means visible there (:data:`VISIBLE_SHARE`) and holding at least
-    :data:`PICK_SHARE` of the pixel's opacity; ``visible`` still lists every visible one.
+    :data:`PICK_SHARE` of the pixel's opacity (or as much as any feature holds, where none
+    holds that much); ``visible`` still lists every visible one.
     """
     visible_map = attribution >= VISIBLE_SHARE
     areas = visible_map.reshape(len(attribution), -1).sum(axis=1)
@@ -140,6 +141,8 @@ def pick_smallest(attribution: np.ndarray, x: int, y: int) -> PickResult:
     )
     if not visible:
         return PickResult(None, (), None)
-    total = float(sum(share for _, share, _ in visible))
-    chosen = next(i for i, share, _ in visible if share >= PICK_SHARE * total)
+    # The bar is at most the largest share: where many features each make a little of the
+    # pixel, the largest still competes.
+    bar = min(PICK_SHARE * sum(share for _, share, _ in visible), max(s for _, s, _ in visible))
+    chosen = next(i for i, share, _ in visible if share >= bar)
     return PickResult(chosen, visible, visible_map[chosen].copy())

@@ -479,6 +479,15 @@ export const VISIBLE_SHARE = 0.02;
 export const PICK_SHARE = 0.15;
 
 /**
+ * The share a feature needs at a pixel to compete for a pick there: PICK_SHARE of the pixel's
+ * opacity, or the largest share where no feature holds that much. `visible`: [[i, share, area]].
+ */
+export function pickBar(visible) {
+  const total = visible.reduce((s, v) => s + v[1], 0);
+  return Math.min(PICK_SHARE * total, Math.max(...visible.map((v) => v[1])));
+}
+
+/**
  * The paper's rule over an attribution (N × H × W): of the features under (x, y) (visible there
  * and holding PICK_SHARE of the pixel's opacity), the one with the smallest projected area.
  * {index, visible: [[i, share, area]], mask} as the server's pick_smallest; mask is a
@@ -497,8 +506,7 @@ export function pickSmallest(attr, n, width, height, x, y) {
   }
   visible.sort((a, b) => a[2] - b[2] || b[1] - a[1] || a[0] - b[0]);
   if (!visible.length) return { index: null, visible: [], mask: null };
-  const total = visible.reduce((s, v) => s + v[1], 0);
-  const chosen = visible.find((v) => v[1] >= PICK_SHARE * total)[0];
+  const chosen = visible.find((v) => v[1] >= pickBar(visible))[0];
   return { index: chosen, visible, mask: featureMask(attr, [chosen], width, height) };
 }
 

@@ -11,7 +11,7 @@
 // the pixel): its outline is drawn at once and it is selected in the decomposition view.
 
 import * as api from "./api.js";
-import { PICK_SHARE } from "./gl_renderer.js";
+import { pickBar } from "./gl_renderer.js";
 import * as glv from "./gl_view.js";
 import { showError, showMessage } from "./messages.js";
 import {
@@ -495,8 +495,7 @@ function applyPick(res, { camera, x, y, add }) {
       // The pick's candidates: the features that make the pixel (a speck that only tints it
       // is visible there but was not in the running).
       const vis = res.visible || [];
-      const total = vis.reduce((sum, v) => sum + v[1], 0);
-      const n = vis.filter((v) => v[1] >= PICK_SHARE * total).length;
+      const n = vis.length ? vis.filter((v) => v[1] >= pickBar(vis)).length : 0;
       pickInfo.textContent = `Selected feature ${res.index + 1}${n > 1 ? ` (the smallest of the ${n} that make this pixel)` : ""}.`;
     }
     set({ pick: { ...res, camera, size: viewSize, x, y }, selected });
