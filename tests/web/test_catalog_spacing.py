@@ -39,3 +39,23 @@ def test_a_load_begun_before_a_new_spacing_is_not_served_after_it(tmp_path, monk
     assert tuple(old[0].spacing) == (1.0, 1.0, 1.5)  # it finishes with what it was asked
     monkeypatch.setattr(VolumeSpec, "load", real_load)
     assert tuple(cat.load(vid).spacing) == (1.0, 1.0, 2.0)  # the next view gets the new one
+
+
+def test_what_is_built_from_a_volume_follows_a_new_spacing(tmp_path, monkeypatch):
+    import intuitf.session.building as building
+
+    raw = tmp_path / "ct_8x6x4_uint8.raw"
+    np.arange(8 * 6 * 4, dtype=np.uint8).tofile(raw)
+    cat = VolumeCatalog([str(raw)])
+    vid = next(e.id for e in cat.entries() if e.kind == "arg")
+    built = []
+
+    def camera_for(vol):  # stands for the view chosen from the volume's structures
+        built.append(tuple(vol.spacing))
+        return {"spacing": list(vol.spacing)}
+
+    monkeypatch.setattr(building, "default_camera", camera_for)
+    assert cat.camera(vid) == cat.camera(vid) == {"spacing": [1.0, 1.0, 1.0]}
+    assert len(built) == 1  # kept
+    cat.set_spacing(vid, [1, 1, 3])
+    assert cat.camera(vid) == {"spacing": [1.0, 1.0, 3.0]}

@@ -110,6 +110,7 @@ class VolumeCatalog:
         self._entries: dict[str, VolumeEntry] = {}
         self._loaded: OrderedDict[str, Any] = OrderedDict()
         self._load_locks: dict[str, threading.Lock] = {}
+        # What is built from a volume, keyed as the loaded volumes (_loaded_key).
         self._histograms: dict[str, dict] = {}
         self._structures: dict[str, list[dict]] = {}
         self._cameras: dict[str, dict] = {}
@@ -256,20 +257,22 @@ class VolumeCatalog:
     def _forget(self, volume_id: str) -> None:
         """Drop what was loaded or computed for a volume (under the lock): its voxels, and
         what a new voxel size changes (the preview camera frames the box)."""
-        for key in [k for k in self._loaded if k.split("|", 1)[0] == volume_id]:
-            del self._loaded[key]
-        for store in (self._histograms, self._structures, self._cameras):
-            store.pop(volume_id, None)
+        for store in (self._loaded, self._histograms, self._structures, self._cameras):
+            for key in [k for k in store if k.split("|", 1)[0] == volume_id]:
+                del store[key]
 
     def _kept(self, store: dict, volume_id: str, build: Callable[[], Any]) -> Any:
-        """``store[volume_id]``, built by ``build()`` (outside the lock) the first time."""
+        """What ``build()`` (run outside the lock) gives for a volume, built the first time
+        for its current options (a build begun before a new spacing is kept under the old)."""
+        entry = self.get(volume_id)
         with self._lock:
-            got = store.get(volume_id)
+            key = _loaded_key(entry)
+            got = store.get(key)
         if got is not None:
             return got
         out = build()
         with self._lock:
-            store[volume_id] = out
+            store[key] = out
         return out
 
     def histogram(self, volume_id: str) -> dict:
