@@ -14,7 +14,7 @@ import pytest
 from mcp_util import FOOT_SIZE, call, call_error, make_config, stdio_params, wait_run_end
 from PIL import Image
 
-from intuitf.session.views import PICK_SHARE
+from intuitf.session.views import pick_bar
 from mcp import Client
 
 pytestmark = pytest.mark.timeout(600)
@@ -127,7 +127,7 @@ async def scenario(client: Client, folders, model_url: str) -> dict:
     assert sel["chosen"] is not None and sel["selected"] == [sel["chosen"]]
     visible = sel["visible_here"]
     # The paper's rule among the features that make the pixel (session.views.pick_smallest).
-    bar = min(PICK_SHARE * sum(f["share"] for f in visible), max(f["share"] for f in visible))
+    bar = pick_bar([(f["index"], f["share"], f["area_pixels"]) for f in visible])
     making = [f for f in visible if f["share"] >= bar]
     assert sel["chosen"] == min(making, key=lambda f: (f["area_pixels"], -f["share"]))["index"]
     assert _image(res).size == (2 * 96 + 4, 96)  # the pick and the feature alone

@@ -16,7 +16,7 @@ from intuitf.session import RunSpec, RunStore, Session
 from intuitf.session.events import read_events
 from intuitf.session.scheduler import BATCH, INTERACTIVE, RenderScheduler
 from intuitf.session.spec import parse_spec
-from intuitf.session.views import PICK_SHARE, pick_smallest
+from intuitf.session.views import pick_bar, pick_smallest
 from intuitf.volume import phantom
 
 SETTINGS = {"population": 6, "generations": 3, "image_size": 48, "output_size": 48, "top_k": 2}
@@ -324,8 +324,7 @@ def test_views_leave_the_judging_camera_and_images_alone(vol):
     feats = s.features(cid, Camera(azimuth=90, elevation=10), size=48)
     assert len(feats) == len(s.tfs[cid])
     if p.index is not None:  # the smallest of the features that make the pixel
-        total = sum(share for _, share, _ in p.visible)
-        bar = min(PICK_SHARE * total, max(share for _, share, _ in p.visible))
+        bar = pick_bar(p.visible)
         areas = {i: a for i, share, a in p.visible if share >= bar}
         assert areas[p.index] == min(areas.values())
     assert s.camera == camera and np.array_equal(s.image(cid, s.tfs[cid]), judged)

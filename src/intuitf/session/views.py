@@ -122,6 +122,15 @@ class ViewRenderer:
         return [cache.render_feature(tf, i) for i in range(len(tf))]
 
 
+def pick_bar(visible: Sequence[tuple[int, float, int]]) -> float:
+    """The share a feature needs at a pixel to compete for a pick there: :data:`PICK_SHARE`
+    of the pixel's opacity, or the largest share where no feature holds that much (where many
+    features each make a little of the pixel, the largest still competes). ``visible``:
+    (index, share, area) of the features visible at the pixel, at least one."""
+    shares = [share for _, share, _ in visible]
+    return min(PICK_SHARE * sum(shares), max(shares))
+
+
 def pick_smallest(attribution: np.ndarray, x: int, y: int) -> PickResult:
     """The paper's rule over an attribution map (N, H, W): of the features under (x, y), the
     one whose projected area (pixels where it is visible) is smallest.
@@ -141,8 +150,6 @@ def pick_smallest(attribution: np.ndarray, x: int, y: int) -> PickResult:
     )
     if not visible:
         return PickResult(None, (), None)
-    # The bar is at most the largest share: where many features each make a little of the
-    # pixel, the largest still competes.
-    bar = min(PICK_SHARE * sum(share for _, share, _ in visible), max(s for _, s, _ in visible))
+    bar = pick_bar(visible)
     chosen = next(i for i, share, _ in visible if share >= bar)
     return PickResult(chosen, visible, visible_map[chosen].copy())

@@ -506,7 +506,8 @@ export function pickSmallest(attr, n, width, height, x, y) {
   }
   visible.sort((a, b) => a[2] - b[2] || b[1] - a[1] || a[0] - b[0]);
   if (!visible.length) return { index: null, visible: [], mask: null };
-  const chosen = visible.find((v) => v[1] >= pickBar(visible))[0];
+  const bar = pickBar(visible);
+  const chosen = visible.find((v) => v[1] >= bar)[0];
   return { index: chosen, visible, mask: featureMask(attr, [chosen], width, height) };
 }
 

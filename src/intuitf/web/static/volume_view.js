@@ -252,6 +252,11 @@ function variantOf(id) {
   return v && v.spacing ? v.spacing.join(",") : "";
 }
 
+/** Whether the page holds volume `id` as the server now gives it, ready to draw. */
+function pageReady(id) {
+  return glv.ready(id, variantOf(id));
+}
+
 /** {volume, tf} when the page renders `t` itself (its volume known to the server by id), else null. */
 function pageTarget(t) {
   if (!glv.renderer() || !t) return null;
@@ -275,7 +280,7 @@ function drawPageFrame() {
   const quality = glPending || "full";
   glPending = null;
   const gt = pageTarget(target());
-  if (!gt || !glv.ready(gt.volume, variantOf(gt.volume))) return frame(quality);
+  if (!gt || !pageReady(gt.volume)) return frame(quality);
   const camera = cameraJSON();
   const my = ++bandTicket; // a newer frame stops an older one drawn in bands
   const opts = { tf: gt.tf, camera, size: viewSize, shading: state.shaded, background: hexToRgb(state.background), quality };
@@ -309,7 +314,7 @@ function pageFrameDone(res, quality, gt, camera) {
     prepareTimer = setTimeout(() => {
       const now = pageTarget(target());
       const pickable = (splitQid(state.current) || (!state.run && now && target().volume)) && !state.draft;
-      if (glPending === null && !drag && now && pickable && glv.ready(now.volume, variantOf(now.volume))) glv.prepare(now.tf, cameraJSON(), viewSize);
+      if (glPending === null && !drag && now && pickable && pageReady(now.volume)) glv.prepare(now.tf, cameraJSON(), viewSize);
     }, 200);
   }
 }
@@ -452,7 +457,7 @@ async function pickAt(e, add) {
   const camera = cameraJSON();
   const was = state.current;
   const gt = pageTarget(t);
-  if (gt && glv.ready(gt.volume, variantOf(gt.volume)) && glv.canPick()) {
+  if (gt && pageReady(gt.volume) && glv.canPick()) {
     // The page's own pick: an attribution pass on the GPU and the smallest-area rule.
     clickStart = performance.now();
     const res = glv.pick(gt.tf, camera, viewSize, x, y);
@@ -495,7 +500,8 @@ function applyPick(res, { camera, x, y, add }) {
       // The pick's candidates: the features that make the pixel (a speck that only tints it
       // is visible there but was not in the running).
       const vis = res.visible || [];
-      const n = vis.length ? vis.filter((v) => v[1] >= pickBar(vis)).length : 0;
+      const bar = pickBar(vis);
+      const n = vis.filter((v) => v[1] >= bar).length;
       pickInfo.textContent = `Selected feature ${res.index + 1}${n > 1 ? ` (the smallest of the ${n} that make this pixel)` : ""}.`;
     }
     set({ pick: { ...res, camera, size: viewSize, x, y }, selected });
@@ -523,7 +529,7 @@ async function maskPixels(uri, size) {
 /** The selection's pixels from the page's attribution pass: {bits, index} or null. */
 function pageSelection() {
   const gt = pageTarget(target());
-  if (!gt || !glv.ready(gt.volume, variantOf(gt.volume)) || !glv.canPick() || state.draft || !state.selected.size) return null;
+  if (!gt || !pageReady(gt.volume) || !glv.canPick() || state.draft || !state.selected.size) return null;
   const indices = [...state.selected].sort((a, b) => a - b);
   const bits = glv.selectionMask(gt.tf, cameraJSON(), viewSize, indices);
   return bits ? { bits, index: indices.join(",") } : null;
@@ -533,7 +539,7 @@ async function drawOverlay() {
   const p = state.pick;
   const mctx = maskCanvas.getContext("2d");
   const pt = pageTarget(target());
-  if (pt && glv.canPick() && glv.ready(pt.volume, variantOf(pt.volume))) {
+  if (pt && glv.canPick() && pageReady(pt.volume)) {
     // Drawn by the page: the selected features' outline, for the camera on view (none while
     // the camera moves; the frame after it stops brings it back).
     const sel = drag && drag.moved ? null : pageSelection();
