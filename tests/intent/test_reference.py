@@ -149,3 +149,31 @@ def test_the_judge_prefers_the_reference_colours_where_the_reference_has_them(fo
     assert judge.score(layered, "color_style_matching", intent) > judge.score(
         shell, "color_style_matching", intent
     )
+
+
+def test_a_reference_layer_faded_out_of_its_structure_fails_the_style(foot_picture, head):
+    """The foot's faint red skin, read onto the head: where the head's skin alone lies on
+    the ray (around the skull) it must show red at all. Faded to a trace of another hue, the
+    head's picture still has the foot's ivory outline (its skull's edge) and much of its
+    colour histogram: with the metric judge, the head's skin faded out over a search."""
+    from intuitf.intent.regions import part_regions
+    from intuitf.session.building import default_camera
+
+    cam = Camera.from_dict(default_camera(head))
+    plain = Intent(kind="image", reference=foot_picture)
+    regions = part_regions(plain, head, cam, (96, 96))
+    assert [r.name for r in regions] == ["outer part"] and regions[0].look == "faint"
+    told = Intent(kind="image", reference=foot_picture, part_regions=regions)
+    skull = Gaussian(0.575, 0.022, 0.45, (0.99, 0.96, 0.86))
+    r = VolumeRenderer(head, size=96)
+    faded = r.render(GaussianTF((Gaussian(0.34, 0.07, 0.004, (0.94, 0.66, 0.49)), skull)), cam)
+    red = r.render(GaussianTF((Gaussian(0.34, 0.07, 0.01, (0.95, 0.35, 0.25)), skull)), cam)
+    judge = MetricJudge()
+
+    def style(img, intent):
+        return judge.score(img, "color_style_matching", intent)
+
+    # The layer shown in its hue loses nothing to the check; faded out, it loses.
+    assert style(red, told) == pytest.approx(style(red, plain))
+    assert style(faded, told) < style(faded, plain) - 0.25
+    assert style(red, told) > style(faded, told)

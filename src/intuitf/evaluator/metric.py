@@ -44,7 +44,10 @@ aspect key                     measure (higher is better unless noted)
                                minus the mean CIE76 distance / 100 of the object's outline
                                colour and of its inside colour (each brightened to one
                                value: their hues) to the reference's (where the colours
-                               are: faint red skin around ivory bone)
+                               are: faint red skin around ivory bone), minus 0.5 times the
+                               share of the reference's layers not shown in their hue where
+                               their structure of this volume alone lies on the ray
+                               (``Intent.part_regions``)
 ``structural_style_matching``  SSIM of the luminance to the reference's, both resized to
                                128 x 128
 ``stroke_color_agreement``     minus the mean over strokes (the pixels of one colour) of
@@ -413,6 +416,13 @@ class MetricJudge:
                 return score - LAYER_WEIGHT
             de = [float(np.linalg.norm(a - b)) for a, b in zip(mine, ref_layers, strict=True)]
             score -= LAYER_WEIGHT * min(1.0, float(np.mean(de)) / 100.0)
+        # Each layer on its own structure of this volume, where it alone lies on the ray
+        # (Intent.part_regions from the reference's layers), shown there in its hue at all:
+        # the outline-and-inside test reads the picture's edge, which on another object need
+        # not be the same layer (a head's skin faded away matched a foot's outline of bone).
+        if intent.part_regions:
+            shown = [_region_colour(f, r) > _REGION_SHOWN for r in intent.part_regions]
+            score -= REF_REGION_WEIGHT * (1.0 - float(np.mean(shown)))
         return score
 
     def _ref_structure(self, f: _Features, intent: Intent) -> float | None:
@@ -669,6 +679,9 @@ BOX_TEXT_PENALTY = 0.35
 #: Weight of the outline-and-inside colour distance in ``color_style_matching`` (the
 #: histogram intersection it is added to lies in [0, 1]).
 LAYER_WEIGHT = 1.0
+#: What ``color_style_matching`` loses for a reference layer not shown in its hue in its
+#: structure's region.
+REF_REGION_WEIGHT = 0.5
 
 #: Words asking for a clear picture of the structures (checked by feature discrimination).
 _CLEAR_RE = re.compile(r"\b(clear(ly|er)?|structures?|details?|distinguish\w*|see)\b")

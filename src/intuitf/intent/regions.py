@@ -41,12 +41,17 @@ def part_regions(intent: Intent, volume, camera, size: tuple[int, int]) -> tuple
 
     hints = [h for h in intent_hints(intent, volume).hints if h.rgb is not None]
     hints = [h for h in hints if h.opacity != "hidden"]
-    # Only when the words name solid parts alone, each on a structure: a translucent layer
-    # ("faint red skin") lies in front of other parts and mixes its colour into their
-    # pixels, over more of the picture than its matched structure covers (checking the
-    # skull's region under faint skin made a judge hide the skin; checking the engine's
-    # translucent casing made it hide the inner part).
-    if not hints or any(h.structure is None or h.opacity not in (None, "opaque") for h in hints):
+    if not hints or any(h.structure is None for h in hints):
+        return ()
+    # For words, only when they name solid parts alone: a translucent layer ("faint red
+    # skin") lies in front of other parts and mixes its colour into their pixels, over more
+    # of the picture than its matched structure covers (checking the skull's region under
+    # faint skin made a text judge hide the skin; checking the engine's translucent casing
+    # made it hide the inner part). A reference picture's layers are checked where each
+    # lies alone on the ray (its outer layer around the inner one): without that, a faint
+    # layer whose structure is larger in the volume than in the reference (a head's scalp
+    # against a foot's skin) was matched by hiding it.
+    if intent.kind == "text" and any(h.opacity not in (None, "opaque") for h in hints):
         return ()
     smap = structure_map_of(volume)
     if smap.labels is None:
