@@ -116,7 +116,7 @@ def test_ray_missing_says_how_to_install(tmp_path, capsys, monkeypatch):
     with pytest.raises(SystemExit) as exc:
         main(["batch", "ref.png", "vols", "--ray", "-o", str(tmp_path / "o")])
     assert exc.value.code == 2
-    err = capsys.readouterr().err
+    err = " ".join(capsys.readouterr().err.split())  # rich wraps long lines
     assert "pip install" in err and "intuitf[ray]" in err and "Traceback" not in err
 
 

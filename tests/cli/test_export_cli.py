@@ -21,14 +21,14 @@ def write_tf(path, value_range=(0.0, 255.0)):
 
 
 def run_main(argv, capsys):
-    """Run the CLI in-process; return (exit code, stdout, stderr)."""
+    """Run the CLI in-process; return (exit code, stdout, stderr with its lines joined)."""
     try:
         main(argv)
         code = 0
     except SystemExit as exc:
         code = exc.code or 0
     out = capsys.readouterr()
-    return code, out.out, out.err
+    return code, out.out, " ".join(out.err.split())  # rich wraps long lines
 
 
 def test_export_through_python_dash_m(tmp_path):
