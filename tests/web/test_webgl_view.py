@@ -126,7 +126,7 @@ def test_without_webgl2_the_server_renders_the_view_and_says_why(chromium, serve
             "() => { const c = document.getElementById('view-canvas');"
             " return c.dataset.quality === 'full' && Number(c.dataset.frames || 0) > 0; }"
         )
-        assert page.get_attribute("#view-canvas", "data-renderer") is None
+        assert page.get_attribute("#view-canvas", "data-renderer") == "server"
         assert "WebGL2" in page.inner_text("#view-note")
         assert "server" in page.inner_text("#view-note")
         assert not errors, errors
@@ -152,4 +152,63 @@ def test_a_volume_over_the_page_limits_is_downsampled_with_a_note(chromium, serv
         assert "Downsampled 2×" in note and "32×32×32" in note and "64×64×64" in note
         assert not errors, errors
     finally:
+        b.close()
+
+
+def _open_run(page, run: str) -> None:
+    page.wait_for_function(
+        'run => JSON.stringify(window.intuitfDebug.state.tree || []).includes(`"name":"${run}"`)',
+        arg=run,
+    )
+    tab = page.locator(f"#history-tabs .tab[data-run='{run}']")
+    if tab.count():
+        tab.click()
+    page.click(f".run-node[data-run='{run}'] > .run-head")
+    page.wait_for_function(
+        "run => { const s = window.intuitfDebug.state;"
+        " return (s.current || '').startsWith(run + '/') && s.candidate && s.candidate.qid === s.current; }",
+        arg=run,
+    )
+
+
+def test_a_run_made_before_its_volume_got_another_voxel_size_is_drawn_as_judged(
+    chromium, server, shots
+):
+    """The page's copy of a volume has the voxel size the volume has now; a run keeps the one
+    it was made with. Drawn with the new one, the run's results showed stretched beside the
+    pictures that were judged: the server draws such a run's view, and the view says why."""
+    import numpy as np
+
+    zz, yy, xx = np.mgrid[:24, :32, :32]
+    ball = np.where(np.hypot(np.hypot(zz - 12, yy - 16), xx - 16) < 9, 200, 20).astype(np.uint8)
+    ball.tofile(server.runs.parent / "data" / "ball_32x32x24_uint8.raw")
+    vid = next(v["id"] for v in server.api("GET", "/api/volumes") if v["id"].startswith("ball"))
+    spec = {
+        "volume": vid,
+        "intent": {"kind": "text", "text": "a red ball"},
+        "judge": {"spec": "metric"},
+        "settings": {"population": 4, "generations": 1, "image_size": 48},
+    }
+    run = server.api("POST", "/api/runs", spec)["name"]
+    server.wait_run(run)
+    assert server.api("GET", f"/api/runs/{run}")["spacing"] == [1.0, 1.0, 1.0]
+    b, page, errors = open_page(chromium, server)
+    try:
+        _open_run(page, run)
+        wait_page_frame(page)  # same voxels: the page draws it
+        assert "voxels" not in page.inner_text("#view-note")
+        server.api("PATCH", f"/api/volumes/{vid}", {"spacing": [1, 1, 2.5]})
+        page.reload()
+        page.wait_for_selector("body.ready")
+        _open_run(page, run)
+        page.wait_for_function(
+            "() => { const c = document.getElementById('view-canvas');"
+            " return c.dataset.renderer === 'server' && c.dataset.quality === 'full'; }"
+        )
+        note = page.inner_text("#view-note")
+        assert "made with voxels of 1 × 1 × 1" in note and "server draws its view" in note
+        page.screenshot(path=str(shots / "run-with-older-voxels.png"))
+        assert not errors, errors
+    finally:
+        server.api("PATCH", f"/api/volumes/{vid}", {"spacing": None})
         b.close()

@@ -987,16 +987,18 @@ async def events(
 
 
 def _run_view(web, name: str) -> dict[str, Any]:
-    """The run's judging camera (a sketch is drawn over that view) and its volume's id in the
-    server's list (None when the run's volume is not among them)."""
+    """The run's judging camera (a sketch is drawn over that view), its volume's id in the
+    server's list (None when the run's volume is not among them) and the voxel size [x, y, z]
+    it was made with (None if unrecorded): the volume may since have been given another."""
     from intuitf.render import Camera
     from intuitf.session import RunDirectory
 
     try:
         record = RunDirectory(web.store.path_of(name)).read_run()
     except IntuitfError:
-        return {"camera": Camera().to_dict(), "volume_id": None}
+        return {"camera": Camera().to_dict(), "volume_id": None, "spacing": None}
     camera = (record.get("settings") or {}).get("camera") or Camera().to_dict()
     source = ((record.get("spec") or {}).get("volume") or {}).get("source")
     volume_id = next((e.id for e in web.catalog.entries() if source and e.source == source), None)
-    return {"camera": camera, "volume_id": volume_id}
+    spacing = (record.get("volume") or {}).get("spacing_xyz")
+    return {"camera": camera, "volume_id": volume_id, "spacing": spacing}

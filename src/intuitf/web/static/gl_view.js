@@ -107,6 +107,17 @@ export function note() {
   return problem || vol.note || "";
 }
 
+/**
+ * Whether the page's copy of volume `id` has the proportions of voxels of size `spacing`
+ * ([x, y, z]): a run keeps the voxel size it was made with, the volume may since have been
+ * given another. True while there is nothing to compare (no spacing, the copy not loaded).
+ */
+export function sameVoxels(id, spacing) {
+  if (!R || !spacing || vol.id !== id || vol.status !== "ready") return true;
+  const m = Math.min(...spacing);
+  return R.invSpacing.every((v, i) => Math.abs(v - m / spacing[i]) <= 1e-6);
+}
+
 export function ready(id, variant = "") {
   return !!R && vol.id === id && vol.variant === variant && vol.status === "ready";
 }

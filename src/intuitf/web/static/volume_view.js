@@ -263,8 +263,20 @@ function pageTarget(t) {
   if (t.volume) return { volume: t.volume, tf: t.tf };
   const c = state.candidate;
   const vol = state.runDetail && state.runDetail.volume_id;
-  if (t.candidate && c && c.qid === t.candidate && c.tf && vol) return { volume: vol, tf: c.tf };
-  return null;
+  if (!t.candidate || !c || c.qid !== t.candidate || !c.tf || !vol) return null;
+  // A run made before its volume got another voxel size is drawn by the server, as judged.
+  if (!glv.sameVoxels(vol, state.runDetail.spacing)) return null;
+  return { volume: vol, tf: c.tf };
+}
+
+/** Why the server draws a run's view the page could draw: the run's voxels differ ("" if not). */
+function voxelNote() {
+  const d = state.runDetail;
+  const t = target();
+  if (!glv.renderer() || !d || !d.volume_id || !t || !t.candidate) return "";
+  if (glv.sameVoxels(d.volume_id, d.spacing)) return "";
+  const size = d.spacing.map((v) => Number(v.toPrecision(4))).join(" × ");
+  return `${d.info.name} was made with voxels of ${size}, not the volume's voxel size now: the server draws its view, as it was judged.`;
 }
 
 /** Draw a page frame at the next animation frame (many requests in one frame draw once). */
@@ -356,6 +368,8 @@ async function showFrame(header, blob) {
   const ms = header.ms !== undefined ? Math.round(header.ms) : "?";
   const render = header.render_ms !== undefined ? ` (render ${Math.round(header.render_ms)})` : "";
   statsEl.textContent = `${header.width || "?"}×${header.height || "?"} ${header.quality || ""} · ${ms} ms${render}`;
+  canvas.dataset.renderer = "server";
+  if (glv.renderer()) noteEl.textContent = voxelNote() || glv.note();
   if (header.quality === "full" && !socket.busy) {
     set({ viewSettled: { camera: cameraJSON(), size: viewSize, shaded: state.shaded, key: lastTargetKey, n: frameCount } });
   }
