@@ -171,6 +171,33 @@ def _open_run(page, run: str) -> None:
     )
 
 
+def _until_quiet(page, seconds: float = 1.5) -> None:
+    """Wait until the view has drawn no frame for ``seconds``."""
+    n = -1
+    for _ in range(40):
+        now = page.get_attribute("#view-canvas", "data-frames")
+        if now == n:
+            return
+        n = now
+        page.wait_for_timeout(seconds * 1000)
+    raise AssertionError("the view kept drawing frames")
+
+
+def _lit_aspect(page) -> float:
+    """Height over width of the lit pixels' bounding box in the view."""
+    h, w = page.evaluate(
+        "() => { const c = document.getElementById('view-canvas');"
+        " const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;"
+        " let x0 = 1e9, x1 = -1, y0 = 1e9, y1 = -1;"
+        " for (let y = 0; y < c.height; y++) for (let x = 0; x < c.width; x++) {"
+        "   const i = 4 * (y * c.width + x);"
+        "   if (d[i] + d[i + 1] + d[i + 2] > 90) { x0 = Math.min(x0, x); x1 = Math.max(x1, x);"
+        "     y0 = Math.min(y0, y); y1 = Math.max(y1, y); } }"
+        " return [y1 - y0 + 1, x1 - x0 + 1]; }"
+    )
+    return h / max(w, 1)
+
+
 def test_a_run_made_before_its_volume_got_another_voxel_size_is_drawn_as_judged(
     chromium, server, shots
 ):
@@ -208,6 +235,22 @@ def test_a_run_made_before_its_volume_got_another_voxel_size_is_drawn_as_judged(
         note = page.inner_text("#view-note")
         assert "made with voxels of 1 × 1 × 1" in note and "server draws its view" in note
         page.screenshot(path=str(shots / "run-with-older-voxels.png"))
+        _until_quiet(page)
+        assert 0.85 < _lit_aspect(page) < 1.15  # the ball round, as judged (1.26 stretched)
+        # A hand edit of the result: drawn on the run's volume too, not stretched 2.5 times.
+        n = int(page.get_attribute("#view-canvas", "data-frames"))
+        page.evaluate(
+            "import('/static/state.js').then(S => { const tf = JSON.parse(JSON.stringify(S.shownTF()));"
+            " tf.gaussians.forEach(g => g.height *= 0.9); S.set({draft: tf}); })"
+        )
+        page.wait_for_function(
+            "n => { const c = document.getElementById('view-canvas');"
+            " return Number(c.dataset.frames) > n && c.dataset.quality === 'full'; }",
+            arg=n,
+        )
+        _until_quiet(page)  # the edit's own frame, not one of the result asked for before it
+        assert page.get_attribute("#view-canvas", "data-renderer") == "server"
+        assert 0.85 < _lit_aspect(page) < 1.15
         assert not errors, errors
     finally:
         server.api("PATCH", f"/api/volumes/{vid}", {"spacing": None})

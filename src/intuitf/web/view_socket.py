@@ -2,8 +2,10 @@
 
 The page sends a request whenever the camera (or TF, size, shading) changes::
 
-    {req, target: {candidate: "RUN/gGGG-NNN"} | {volume: ID, tf: TF JSON},
+    {req, target: {candidate: "RUN/gGGG-NNN"} | {volume: ID, tf: TF JSON, run?: NAME},
      camera, size, shaded, background, quality: "drag" | "full", highlight?: [indices]}
+
+(``run``: a hand edit of that run's result, drawn on the run's own volume.)
 
 and gets back a text header ``{req, width, height, format, ms, quality, wait_ms, render_ms}``
 (``ms`` in all, of which ``wait_ms`` waiting for the render worker) followed at once by
@@ -31,6 +33,7 @@ from intuitf.web.common import (
     ApiError,
     background_of,
     camera_of,
+    check_run_name,
     check_size,
     encode_jpeg,
     encode_png,
@@ -159,6 +162,12 @@ class ViewSocket:
         if "volume" in target:
             entry = web.catalog.get(target["volume"])
             tf = tf_of(target.get("tf"))
+            if target.get("run"):
+                # A hand edit of a run's result: on the run's own volume (the voxel size it
+                # was made with, which the catalog's may no longer be).
+                run = str(target["run"])
+                check_run_name(run)
+                return tf, await asyncio.to_thread(web.volume_of_run, run)
             volume = await asyncio.to_thread(web.catalog.load, entry.id)
             return tf, volume
         raise ApiError(422, "A target is {candidate: RUN/gGGG-NNN} or {volume: ID, tf: ...}.")

@@ -197,7 +197,8 @@ function resize() {
 function target() {
   if (state.draft) {
     const vol = runVolumeId();
-    return vol ? { volume: vol, tf: state.draft } : null;
+    // A hand edit of a run's result is drawn on the run's volume (its own voxel size).
+    return vol ? { volume: vol, tf: state.draft, ...(state.run ? { run: state.run } : {}) } : null;
   }
   if (state.current) return { candidate: state.current };
   // No run yet: the chosen volume with a TF on its histogram's materials, to look at first.
@@ -260,6 +261,7 @@ function pageReady(id) {
 /** {volume, tf} when the page renders `t` itself (its volume known to the server by id), else null. */
 function pageTarget(t) {
   if (!glv.renderer() || !t) return null;
+  if (t.volume && t.run && !glv.sameVoxels(t.volume, state.runDetail && state.runDetail.spacing)) return null;
   if (t.volume) return { volume: t.volume, tf: t.tf };
   const c = state.candidate;
   const vol = state.runDetail && state.runDetail.volume_id;
@@ -273,7 +275,7 @@ function pageTarget(t) {
 function voxelNote() {
   const d = state.runDetail;
   const t = target();
-  if (!glv.renderer() || !d || !d.volume_id || !t || !t.candidate) return "";
+  if (!glv.renderer() || !d || !d.volume_id || !t || !(t.candidate || t.run)) return "";
   if (glv.sameVoxels(d.volume_id, d.spacing)) return "";
   const size = d.spacing.map((v) => Number(v.toPrecision(4))).join(" × ");
   return `${d.info.name} was made with voxels of ${size}, not the volume's voxel size now: the server draws its view, as it was judged.`;
