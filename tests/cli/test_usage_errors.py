@@ -108,14 +108,18 @@ def test_choice_options_accept_any_case(tmp_path, capsys):
 
 
 def test_summary_names_the_report_only_when_there_is_one(tmp_path, monkeypatch):
+    """...and its paths and the command to continue stay whole, however long: Rich broke a
+    path wider than the console with a newline, and a copied ``--resume PATH`` failed."""
     from intuitf.cli import optimize_cmds
     from intuitf.evaluator.types import Cost
 
+    run_dir = tmp_path / ("a-run-folder-with-a-long-name-" * 3)
+    run_dir.mkdir()
     outcome = SimpleNamespace(
         best=[],
         cost=Cost(),
         generations_done=0,
-        run_dir=tmp_path,
+        run_dir=run_dir,
         completed=False,
         message="Stopped: the call budget is spent.",
     )
@@ -124,10 +128,13 @@ def test_summary_names_the_report_only_when_there_is_one(tmp_path, monkeypatch):
     with optimize_cmds.console.capture() as cap:
         optimize_cmds._print_summary(outcome, session, 0.0)
     assert "(report:" not in cap.get()
-    (tmp_path / "report.html").write_text("<html></html>")
+    (run_dir / "report.html").write_text("<html></html>")
     with optimize_cmds.console.capture() as cap:
         optimize_cmds._print_summary(outcome, session, 0.0)
-    assert f"(report: {tmp_path / 'report.html'})" in _flat(cap.get())
+    out = cap.get()
+    assert len(str(run_dir)) > optimize_cmds.console.width
+    assert f"(report: {run_dir / 'report.html'})" in out
+    assert f"intuitf optimize --resume {run_dir}\n" in out
 
 
 def test_fake_server_fault_rates_above_one_are_a_usage_error():
@@ -169,3 +176,14 @@ def test_a_ctrl_c_after_the_command_ends_the_process_quietly():
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip().splitlines()[-1] == "True"
+
+
+def test_an_error_quotes_a_long_path_whole(tmp_path, capsys):
+    """The error and what to do are soft-wrapped: the terminal folds a long line, and a path
+    in it copies whole (Rich broke it with a newline at 80 columns)."""
+    missing = tmp_path / ("a-folder-with-a-long-name-" * 4) / "ct_8x8x8_uint8.raw"
+    with pytest.raises(SystemExit) as ei:
+        cli_app.main(["info", str(missing)])
+    assert ei.value.code == 2
+    err = capsys.readouterr().err
+    assert str(missing) in err and len(str(missing)) > 80

@@ -97,10 +97,16 @@ def main(argv: list[str] | None = None) -> None:
         if isinstance(rc, int) and rc != 0:
             sys.exit(rc)
     except IntuitfError as exc:
-        # escape(): messages quote paths and config snippets such as "[api_keys]".
-        err_console.print(f"[bold red]error:[/] {escape(exc.message)}", highlight=False)
+        # escape(): messages quote paths and config snippets such as "[api_keys]". Soft wrap:
+        # the terminal wraps long lines; Rich would break the paths and commands they quote
+        # with newlines (a log or a copied "--resume PATH" then has a broken path).
+        err_console.print(
+            f"[bold red]error:[/] {escape(exc.message)}", highlight=False, soft_wrap=True
+        )
         if exc.hint:
-            err_console.print(f"[yellow]what to do:[/] {escape(exc.hint)}", highlight=False)
+            err_console.print(
+                f"[yellow]what to do:[/] {escape(exc.hint)}", highlight=False, soft_wrap=True
+            )
         sys.exit(2)
     except KeyboardInterrupt:
         err_console.print("[yellow]Interrupted.[/] Everything finished so far was kept.")

@@ -79,7 +79,7 @@ def register(app: typer.Typer) -> None:
             stem = tf_file.name.removesuffix(".json").removesuffix(".tf")
             output = export_path(tf_file.with_name(stem), fmt)
         path = write_export(tf, fmt, output, vr, unit_distance=voxel_size)
-        console.print(f"Wrote {path}")
+        console.print(f"Wrote {path}", soft_wrap=True)
 
     @app.command("report")
     def report(
@@ -96,4 +96,4 @@ def register(app: typer.Typer) -> None:
                 "Give a run folder written by `intuitf optimize` (or a batch's runs/KEY).",
             )
         path = build_report(run_dir)
-        console.print(f"Report: {path}")
+        console.print(f"Report: {path}", soft_wrap=True)

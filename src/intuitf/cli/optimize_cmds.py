@@ -146,12 +146,16 @@ def _print_summary(outcome, session, started: float) -> None:
         color = "green" if outcome.completed else "yellow"
         console.print(f"[{color}]{escape(outcome.message)}[/]")
         report = outcome.run_dir / "report.html"
+        # Paths and commands to copy: soft wrap (the terminal's), never a newline inside.
         console.print(
             f"Results: [bold]{outcome.run_dir}[/]"
-            + (f"  (report: {report})" if report.exists() else "")
+            + (f"  (report: {report})" if report.exists() else ""),
+            soft_wrap=True,
         )
         if not outcome.completed:
-            console.print(f"Continue with: intuitf optimize --resume {outcome.run_dir}")
+            console.print(
+                f"Continue with: intuitf optimize --resume {outcome.run_dir}", soft_wrap=True
+            )
 
 
 def _print_lock_note(session) -> None:
@@ -415,7 +419,8 @@ def register(app: typer.Typer) -> None:
         _print_summary(outcome, session, started)
         if outcome.run_dir is not None and (outcome.run_dir / "report.html").exists():
             console.print(
-                f"Open {outcome.run_dir / 'report.html'} in a browser to see the results."
+                f"Open {outcome.run_dir / 'report.html'} in a browser to see the results.",
+                soft_wrap=True,
             )
 
 
