@@ -187,3 +187,21 @@ def test_an_error_quotes_a_long_path_whole(tmp_path, capsys):
     assert ei.value.code == 2
     err = capsys.readouterr().err
     assert str(missing) in err and len(str(missing)) > 80
+
+
+@pytest.mark.parametrize(
+    ("option", "suggested"),
+    [
+        ("--workrs", "--workers"),
+        ("--ray-timout", "--ray-timeout"),
+        ("--ray-address", "--ray [ADDRESS]"),  # the address follows --ray
+    ],
+)
+def test_a_mistyped_batch_option_names_the_one_meant(option, suggested, capsys):
+    """``batch`` lets unknown options through (for ``--ray ADDRESS``) and rejects them itself:
+    with the option meant, as Click does for every other command."""
+    with pytest.raises(SystemExit) as ei:
+        cli_app.main(["batch", "ref.png", option, "2", "phantom"])
+    assert ei.value.code == 2
+    err = _flat(capsys.readouterr().err)
+    assert f"No such option: {option} (Possible options: {suggested}" in err

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import difflib
 import os
 import re
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import typer
@@ -37,8 +39,12 @@ HELP = (
 )
 
 
-def _split_ray(volumes: list[str]) -> tuple[list[str], str | None]:
-    """Take ``--ray [ADDRESS]`` out of the arguments (Typer has no option with an optional value)."""
+def _split_ray(volumes: list[str], known: Sequence[str] = ()) -> tuple[list[str], str | None]:
+    """Take ``--ray [ADDRESS]`` out of the arguments (Typer has no option with an optional value).
+
+    The command lets unknown options through (for ``--ray ADDRESS``): one left over is an
+    error here, with the ``known`` option names closest to it as Click would suggest them.
+    """
     out: list[str] = []
     ray: str | None = None
     i = 0
@@ -53,8 +59,18 @@ def _split_ray(volumes: list[str]) -> tuple[list[str], str | None]:
         elif tok.startswith("--ray="):
             ray = tok.split("=", 1)[1] or "local"
         elif tok.startswith("-") and not Path(tok).exists():
+            name = tok.split("=", 1)[0]
+            # A near spelling first ("--ray-timout"), then an option the token begins with
+            # ("--ray-address" meant "--ray ADDRESS"), then what Click would suggest.
+            close = (
+                difflib.get_close_matches(name, known, n=3, cutoff=0.8)
+                or [k for k in known if name.startswith(k + "-")]
+                or difflib.get_close_matches(name, known, n=3, cutoff=0.6)
+            )
+            close = ["--ray [ADDRESS]" if k == "--ray" else k for k in close]
             raise IntuitfError(
-                f"No such option: {tok}",
+                f"No such option: {tok}"
+                + (f" (Possible options: {', '.join(close)})" if close else ""),
                 "See `intuitf batch --help` for the options.",
             )
         else:
@@ -292,7 +308,8 @@ def register(app: typer.Typer) -> None:
 
         started = time.perf_counter()
         args = ([reference] if reference else []) + list(volumes or [])
-        args, ray = _split_ray(args)
+        known = [o for p in ctx.command.params for o in p.opts if o.startswith("--")]
+        args, ray = _split_ray(args, known)
         ray = ray or ctx.meta.get("intuitf.ray") or ray_doc
         if ray is not None:
             from intuitf.batch.runner import import_ray
