@@ -152,3 +152,21 @@ def stop_server(server: WebServer) -> None:
     except subprocess.TimeoutExpired:
         proc.kill()
         proc.wait(timeout=10)
+
+
+def show_run(page, run: str) -> None:
+    """Open the history tab that holds ``run`` and make the run current."""
+    page.wait_for_function(
+        "run => window.intuitfDebug.state.tree && JSON.stringify(window.intuitfDebug.state.tree)"
+        '.includes(`"name":"${run}"`)',
+        arg=run,
+    )
+    tab = page.locator(f"#history-tabs .tab[data-run='{run}']")
+    if tab.count():
+        tab.click()
+    page.click(f".run-node[data-run='{run}'] > .run-head")
+    page.wait_for_function(
+        "run => { const s = window.intuitfDebug.state;"
+        " return (s.current || '').startsWith(run + '/') && s.candidate && s.candidate.qid === s.current; }",
+        arg=run,
+    )

@@ -17,6 +17,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from helpers.browser import show_run
+
 pytestmark = pytest.mark.slow
 
 FIRST_GALLERY_S = 120_000  # ms: first generation of a fresh server (the renderer compiles)
@@ -99,24 +101,6 @@ def click_structure(page) -> int:
 def flat(g: dict) -> list[float]:
     """A Gaussian as numbers: mean, width, height, r, g, b."""
     return [g["mean"], g["width"], g["height"], *g["color"]]
-
-
-def show_run(page, run: str) -> None:
-    """Open the history tab that holds ``run`` and make the run current."""
-    page.wait_for_function(
-        "run => window.intuitfDebug.state.tree && JSON.stringify(window.intuitfDebug.state.tree)"
-        '.includes(`"name":"${run}"`)',
-        arg=run,
-    )
-    tab = page.locator(f"#history-tabs .tab[data-run='{run}']")
-    if tab.count():
-        tab.click()
-    page.click(f".run-node[data-run='{run}'] > .run-head")
-    page.wait_for_function(
-        "run => { const s = window.intuitfDebug.state;"
-        " return (s.current || '').startsWith(run + '/') && s.candidate && s.candidate.qid === s.current; }",
-        arg=run,
-    )
 
 
 def start_new_run(page) -> str:

@@ -6,7 +6,14 @@ from __future__ import annotations
 
 import pytest
 
-from helpers.browser import CHROMIUM, CHROMIUM_ARGS, skip_reason, start_server, stop_server
+from helpers.browser import (
+    CHROMIUM,
+    CHROMIUM_ARGS,
+    show_run,
+    skip_reason,
+    start_server,
+    stop_server,
+)
 from helpers.data import DATA, data_dir
 
 pytestmark = pytest.mark.slow
@@ -155,22 +162,6 @@ def test_a_volume_over_the_page_limits_is_downsampled_with_a_note(chromium, serv
         b.close()
 
 
-def _open_run(page, run: str) -> None:
-    page.wait_for_function(
-        'run => JSON.stringify(window.intuitfDebug.state.tree || []).includes(`"name":"${run}"`)',
-        arg=run,
-    )
-    tab = page.locator(f"#history-tabs .tab[data-run='{run}']")
-    if tab.count():
-        tab.click()
-    page.click(f".run-node[data-run='{run}'] > .run-head")
-    page.wait_for_function(
-        "run => { const s = window.intuitfDebug.state;"
-        " return (s.current || '').startsWith(run + '/') && s.candidate && s.candidate.qid === s.current; }",
-        arg=run,
-    )
-
-
 def _until_quiet(page, seconds: float = 1.5) -> None:
     """Wait until the view has drawn no frame for ``seconds``."""
     n = -1
@@ -221,13 +212,13 @@ def test_a_run_made_before_its_volume_got_another_voxel_size_is_drawn_as_judged(
     assert server.api("GET", f"/api/runs/{run}")["spacing"] == [1.0, 1.0, 1.0]
     b, page, errors = open_page(chromium, server)
     try:
-        _open_run(page, run)
+        show_run(page, run)
         wait_page_frame(page)  # same voxels: the page draws it
         assert "voxels" not in page.inner_text("#view-note")
         server.api("PATCH", f"/api/volumes/{vid}", {"spacing": [1, 1, 2.5]})
         page.reload()
         page.wait_for_selector("body.ready")
-        _open_run(page, run)
+        show_run(page, run)
         page.wait_for_function(
             "() => { const c = document.getElementById('view-canvas');"
             " return c.dataset.renderer === 'server' && c.dataset.quality === 'full'; }"
