@@ -67,6 +67,7 @@ class ViewSocket:
         self.send_lock = asyncio.Lock()
         self.task: asyncio.Task | None = None
         self._tfs: dict[str, Any] = {}
+        self._run_volumes: dict[str, Any] = {}  # a run's volume, for hand edits of its results
         #: Recent render time per pixel of drag frames (ms), for the adaptive level of detail.
         self._ms_per_px: float | None = None
         self.budget = getattr(web, "drag_budget_ms", DRAG_BUDGET_MS)
@@ -167,7 +168,11 @@ class ViewSocket:
                 # was made with, which the catalog's may no longer be).
                 run = str(target["run"])
                 check_run_name(run)
-                return tf, await asyncio.to_thread(web.volume_of_run, run)
+                volume = self._run_volumes.get(run)
+                if volume is None:
+                    volume = await asyncio.to_thread(web.volume_of_run, run)
+                    self._run_volumes[run] = volume
+                return tf, volume
             volume = await asyncio.to_thread(web.catalog.load, entry.id)
             return tf, volume
         raise ApiError(422, "A target is {candidate: RUN/gGGG-NNN} or {volume: ID, tf: ...}.")
