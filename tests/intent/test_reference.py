@@ -156,6 +156,7 @@ def test_a_reference_layer_faded_out_of_its_structure_fails_the_style(foot_pictu
     the ray (around the skull) it must show red at all. Faded to a trace of another hue, the
     head's picture still has the foot's ivory outline (its skull's edge) and much of its
     colour histogram: with the metric judge, the head's skin faded out over a search."""
+    from intuitf.evaluator.metric import REF_REGION_WEIGHT
     from intuitf.intent.regions import part_regions
     from intuitf.session.building import default_camera
 
@@ -175,5 +176,5 @@ def test_a_reference_layer_faded_out_of_its_structure_fails_the_style(foot_pictu
 
     # The layer shown in its hue loses nothing to the check; faded out, it loses.
     assert style(red, told) == pytest.approx(style(red, plain))
-    assert style(faded, told) < style(faded, plain) - 0.25
+    assert style(faded, told) == pytest.approx(style(faded, plain) - REF_REGION_WEIGHT)
     assert style(red, told) > style(faded, told)

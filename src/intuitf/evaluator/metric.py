@@ -44,7 +44,7 @@ aspect key                     measure (higher is better unless noted)
                                minus the mean CIE76 distance / 100 of the object's outline
                                colour and of its inside colour (each brightened to one
                                value: their hues) to the reference's (where the colours
-                               are: faint red skin around ivory bone), minus 0.5 times the
+                               are: faint red skin around ivory bone), minus 0.3 times the
                                share of the reference's layers not shown in their hue where
                                their structure of this volume alone lies on the ray
                                (``Intent.part_regions``)
@@ -681,7 +681,7 @@ BOX_TEXT_PENALTY = 0.35
 LAYER_WEIGHT = 1.0
 #: What ``color_style_matching`` loses for a reference layer not shown in its hue in its
 #: structure's region.
-REF_REGION_WEIGHT = 0.5
+REF_REGION_WEIGHT = 0.3
 
 #: Words asking for a clear picture of the structures (checked by feature discrimination).
 _CLEAR_RE = re.compile(r"\b(clear(ly|er)?|structures?|details?|distinguish\w*|see)\b")
