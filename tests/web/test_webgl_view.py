@@ -164,12 +164,12 @@ def test_a_volume_over_the_page_limits_is_downsampled_with_a_note(chromium, serv
 
 def _until_quiet(page, seconds: float = 1.5) -> None:
     """Wait until the view has drawn no frame for ``seconds``."""
-    n = -1
+    seen = None
     for _ in range(40):
         now = page.get_attribute("#view-canvas", "data-frames")
-        if now == n:
+        if seen is not None and now == seen:
             return
-        n = now
+        seen = now
         page.wait_for_timeout(seconds * 1000)
     raise AssertionError("the view kept drawing frames")
 
