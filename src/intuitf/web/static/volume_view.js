@@ -353,6 +353,10 @@ function setBusy(b) {
 
 async function showFrame(header, blob) {
   if (!socket.busy) setBusy(false);
+  // A frame asked of the server before the page could draw this view (its volume or the
+  // result's TF still on the way) is stale once the page draws it: it would cover the page's.
+  const gt = pageTarget(target());
+  if (gt && pageReady(gt.volume)) return;
   let bitmap;
   try {
     bitmap = await createImageBitmap(blob);
