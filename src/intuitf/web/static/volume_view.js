@@ -261,14 +261,15 @@ function pageReady(id) {
 /** {volume, tf} when the page renders `t` itself (its volume known to the server by id), else null. */
 function pageTarget(t) {
   if (!glv.renderer() || !t) return null;
-  if (t.volume && t.run && !glv.sameVoxels(t.volume, state.runDetail && state.runDetail.spacing)) return null;
-  if (t.volume) return { volume: t.volume, tf: t.tf };
   const c = state.candidate;
-  const vol = state.runDetail && state.runDetail.volume_id;
-  if (!t.candidate || !c || c.qid !== t.candidate || !c.tf || !vol) return null;
-  // A run made before its volume got another voxel size is drawn by the server, as judged.
-  if (!glv.sameVoxels(vol, state.runDetail.spacing)) return null;
-  return { volume: vol, tf: c.tf };
+  const d = state.runDetail;
+  let gt = null;
+  if (t.volume) gt = { volume: t.volume, tf: t.tf };
+  else if (t.candidate && c && c.qid === t.candidate && c.tf && d && d.volume_id) gt = { volume: d.volume_id, tf: c.tf };
+  // A run's result, or a hand edit of it, made before its volume got another voxel size is
+  // drawn by the server, as judged.
+  if (gt && (t.run || t.candidate) && !glv.sameVoxels(gt.volume, d && d.spacing)) return null;
+  return gt;
 }
 
 /** Why the server draws a run's view the page could draw: the run's voxels differ ("" if not). */
