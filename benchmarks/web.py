@@ -3,7 +3,7 @@ server's stills, on a real volume (the bonsai by default).
 
 Run: ``python benchmarks/web.py`` (options: ``--volume ID``, ``--data DIR`` (default
 ``$INTUITF_DATA`` or ``../shared/data/volumes``), ``--frames N``, ``--stills N``,
-``--quick``). A real ``intuitf serve`` app runs in its own process on a free loopback port;
+``--quick``, ``--gl swiftshader|llvmpipe``). A real ``intuitf serve`` app runs in its own process on a free loopback port;
 this process drives headless Chromium (Debian's ``chromium``, Playwright) against it and asks
 the server for stills over the view socket.
 
@@ -32,8 +32,10 @@ pixels):
 - **server stills**: 256² and 512² shaded, the server's own render time (frame header
   ``render_ms``), no run going.
 
-Headless Chromium here renders WebGL2 in software (SwiftShader) on the machine's cores: its
-figures bound any GPU's from above. The cost per sample lets one estimate a GPU: a laptop GPU
+Headless Chromium here renders WebGL2 in software on the machine's cores: SwiftShader by
+default (``--disable-gpu``, as the tests run it), or Mesa's llvmpipe with ``--gl llvmpipe``
+(about twice as fast on the same shader here). Either way its figures bound any GPU's from
+above. The cost per sample lets one estimate a GPU: a laptop GPU
 does on the order of 10⁹–10¹⁰ samples a second where SwiftShader does about 10⁸.
 
 Targets on the 2-core reference machine, in software: 256² frame ≤ 200 ms, 512² ≤ 600 ms,
@@ -57,10 +59,17 @@ import httpx
 
 CHROMIUM_ARGS = [
     "--no-sandbox",
-    "--disable-gpu",
     "--disable-background-networking",
     "--disable-component-update",
 ]
+#: The software renderers Chromium can draw WebGL2 with here: SwiftShader (what it uses with
+#: ``--disable-gpu``, the tests' setting; the Subzero JIT, 4-wide) and Mesa's llvmpipe through
+#: ANGLE's EGL backend (LLVM, 8-wide: the software renderer a Linux desktop without a GPU
+#: driver has). Neither is a GPU: both bound its figures from above.
+GL_ARGS = {
+    "swiftshader": ["--disable-gpu"],
+    "llvmpipe": ["--use-angle=gl-egl", "--ignore-gpu-blocklist"],
+}
 DEFAULT_DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "volumes"
 
 
@@ -183,6 +192,8 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=12, help="page frames per measurement")
     ap.add_argument("--stills", type=int, default=6, help="server stills per size")
     ap.add_argument("--quick", action="store_true", help="few frames and stills")
+    ap.add_argument("--gl", choices=sorted(GL_ARGS), default="swiftshader",
+                    help="Chromium's software WebGL2 renderer (default: swiftshader)")  # fmt: skip
     ap.add_argument("--shots", default=None, help="folder for screenshots of the page")
     ap.add_argument("--serve", nargs=4, metavar=("PORT", "RUNS", "TOKEN", "DATA"),
                     help=argparse.SUPPRESS)  # fmt: skip
@@ -247,7 +258,8 @@ def browser_part(base: str, token: str, args, chromium: str, hist: dict) -> dict
 
     out: dict = {}
     with sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=chromium, headless=True, args=CHROMIUM_ARGS)
+        b = pw.chromium.launch(executable_path=chromium, headless=True,
+                               args=CHROMIUM_ARGS + GL_ARGS[args.gl])  # fmt: skip
         page = b.new_page(viewport={"width": 1440, "height": 900})
         page.set_default_timeout(120_000)
         page.goto(f"{base}/?token={token}")
