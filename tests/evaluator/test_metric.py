@@ -122,6 +122,35 @@ def test_reference_prefers_closer_colours_and_structure():
     assert v.overall is Choice.FIRST
 
 
+def test_a_reference_of_another_object_is_not_matched_by_an_empty_picture():
+    """The reference shows one object (a faint red shell around bright ivory), the rendering
+    another, elsewhere in the picture. Showing that object with the same faint shell and
+    bright inside matches the reference's structure better than fading it out: SSIM over the
+    whole picture, mostly the black around both objects, ranked the faded one higher (a head
+    matched to a foot's picture lost its skin and skull over a long search)."""
+
+    def shell_and_core(cx, cy, r, shell, core):
+        img = paint(canvas(), disk(r, cx, cy), shell)
+        return paint(img, disk(0.6 * r, cx, cy), core)
+
+    ref = shell_and_core(0.3, 0.35, 0.18, (90, 20, 15), (235, 228, 205))
+    shown = shell_and_core(0.65, 0.6, 0.25, (85, 22, 18), (230, 225, 200))
+    faded = shell_and_core(0.65, 0.6, 0.25, (12, 3, 2), (30, 29, 26))
+    j = MetricJudge()
+    intent = Intent(kind="image", reference=ref)
+    v = cmp(j, shown, faded, [aspect("structural_style_matching")], intent)
+    assert v.overall is Choice.FIRST
+    empty = canvas()
+    assert j.score(empty, "structural_style_matching", intent) == 0.0
+    # The same object in the same place still compares by its structure (SSIM): a copy of
+    # the reference beats a shifted one.
+    same = shell_and_core(0.3, 0.35, 0.18, (90, 20, 15), (235, 228, 205))
+    moved = shell_and_core(0.36, 0.41, 0.18, (90, 20, 15), (235, 228, 205))
+    assert cmp(j, same, moved, [aspect("structural_style_matching")], intent).overall is (
+        Choice.FIRST
+    )
+
+
 def test_sketch_prefers_stroke_colours_and_preservation():
     j = MetricJudge()
     base = paint(paint(canvas(), disk(0.4), (220, 220, 210)), disk(0.15, 0.3, 0.3), (220, 220, 210))

@@ -48,8 +48,13 @@ aspect key                     measure (higher is better unless noted)
                                share of the reference's layers not shown in their hue where
                                their structure of this volume alone lies on the ray
                                (``Intent.part_regions``)
-``structural_style_matching``  SSIM of the luminance to the reference's, both resized to
-                               128 x 128
+``structural_style_matching``  what is bright (opaque) and what dim (faint) in the object:
+                               1 - the mean L* difference / 100 of its outline's and its
+                               inside's colours to the reference's (without both: the
+                               intersection of the foregrounds' L* histograms), and,
+                               weighted by the overlap (IoU) of the two objects'
+                               silhouettes, the SSIM of the luminance (128 x 128) over both
+                               objects; an empty picture scores 0
 ``stroke_color_agreement``     minus the mean over strokes (the pixels of one colour) of
                                the mean CIE76 ΔE between the rendering and the stroke's
                                colour where the sketch's alpha > 0; a pixel where the base
@@ -140,6 +145,7 @@ class _Features:
     quality: Quality  # clarity, separation, richness, discrimination (metric_quality)
     rgb: np.ndarray | None = None  # the picture (uint8), for measures made on demand
     _layers: tuple | None = None  # (outline Lab, inside Lab) or (), once asked for
+    _raw_layers: tuple | None = None  # (outline RGB, inside RGB) as shown, or ()
 
     def layers(self) -> tuple:
         """CIELAB of the object's outline band and of its inside, each brightened to a value
@@ -151,13 +157,20 @@ class _Features:
         skin from an opaque grey one there is the hue, not the lightness.
         """
         if self._layers is None:
-            found = outline_and_inside(self.rgb) if self.rgb is not None else None
-            self._layers = () if found is None else tuple(
+            self._layers = tuple(
                 rgb2lab((np.clip(c, 0, 1) * 0.95 / max(float(c.max()), 1e-3))[None, None]
                         .astype(np.float32))[0, 0]
-                for c in found
+                for c in self.raw_layers()
             )  # fmt: skip
         return self._layers
+
+    def raw_layers(self) -> tuple:
+        """RGB (0..1) of the object's outline band and of its inside as the picture shows
+        them, () when it has no both; worked out once."""
+        if self._raw_layers is None:
+            found = outline_and_inside(self.rgb) if self.rgb is not None else None
+            self._raw_layers = () if found is None else tuple(found)
+        return self._raw_layers
 
 
 def _digest(arr: np.ndarray) -> str:
@@ -223,6 +236,35 @@ def _features(image: np.ndarray) -> _Features:
         lab, fg, bg_lab, coverage, float(entropy), float(variety), contrast, opacity,
         lab_hist, mean_lab, gray128, quality(rgb), rgb,
     )  # fmt: skip
+
+
+def _fg128(f: _Features) -> np.ndarray:
+    """The foreground resized to the 128 x 128 grid of ``gray128``."""
+    return _resize_mask(f.fg, (128, 128))
+
+
+def _layer_lightness(f: _Features, r: _Features) -> float:
+    """1 minus the mean L* difference / 100 of the outline's and the inside's colours of
+    ``f``'s object to ``r``'s; without both layers in either, the intersection of the
+    foregrounds' L* histograms (8 bands; 0 for an empty picture).
+
+    The layers' lightness, not the histogram's, when both have them: how much of a picture is
+    dim depends on the object (a chest has more soft tissue around its bones than a foot),
+    how dim its shell is against its core does not."""
+    mine, theirs = f.raw_layers(), r.raw_layers()
+    if mine and theirs:
+        light = [rgb2lab(np.clip(c, 0, 1)[None, None].astype(np.float32))[0, 0, 0]
+                 for c in (*mine, *theirs)]  # fmt: skip
+        return 1.0 - (abs(light[0] - light[2]) + abs(light[1] - light[3])) / 200.0
+
+    def hist(x: _Features) -> np.ndarray:
+        light = x.lab[x.fg][:, 0]
+        if light.size == 0:
+            return np.zeros(8)
+        counts = np.histogram(light, bins=8, range=(0.0, 100.0))[0].astype(np.float64)
+        return counts / counts.sum()
+
+    return float(np.minimum(hist(f), hist(r)).sum())
 
 
 def _named_lab(names: Sequence[str]) -> np.ndarray:
@@ -426,10 +468,26 @@ class MetricJudge:
         return score
 
     def _ref_structure(self, f: _Features, intent: Intent) -> float | None:
+        """What is bright (opaque) and what dim (faint context) in the object, as in the
+        reference: how near the lightness of the object's outline and of its inside are to
+        the reference's (a faint shell shows dim at the edge, an opaque core bright inside),
+        and where the two objects coincide in the picture, the SSIM of the luminance over
+        both objects; weighted by how much they coincide (their silhouettes' IoU).
+
+        SSIM over the whole picture, as before, compared mostly the black around the objects:
+        with a reference of another object (the foot for a head), the emptier a picture, the
+        more it matched, and a twelve-generation search faded the head's skin and skull out.
+        """
         if intent.reference is None:
             return None
         r = self.features(intent.reference)
-        return float(structural_similarity(f.gray128, r.gray128, data_range=1.0))
+        mine, theirs = _fg128(f), _fg128(r)
+        union = mine | theirs
+        if not union.any():
+            return 0.0
+        overlap = float((mine & theirs).sum() / union.sum())
+        _, ssim = structural_similarity(f.gray128, r.gray128, data_range=1.0, full=True)
+        return (1.0 - overlap) * _layer_lightness(f, r) + overlap * float(ssim[union].mean())
 
     def _stroke(self, f: _Features, intent: Intent) -> float | None:
         """Minus the mean over strokes (pixels of one colour) of their mean ΔE: each stroke
