@@ -151,6 +151,22 @@ def test_a_reference_of_another_object_is_not_matched_by_an_empty_picture():
     )
 
 
+def test_a_faint_colour_is_matched_by_its_hue_not_only_by_a_nearby_one():
+    """A faint red layer that shows red beats one drifted towards orange: both lie within the
+    30 degrees a faint colour may keep of its hue over a dark background, and counted alike
+    there nothing held a faint skin's red over a long search."""
+    j = MetricJudge()
+    intent = Intent(kind="text", text="opaque white core and faint red skin")
+
+    def layered(skin):
+        # A thin shell (a seventh of the object), as a faint skin shows around a bone.
+        return paint(paint(canvas(), disk(0.4), skin), disk(0.37), (240, 240, 240))
+
+    red, orange_red = layered((105, 22, 20)), layered((105, 48, 14))
+    v = cmp(j, red, orange_red, [aspect("text_alignment")], intent)
+    assert v.overall is Choice.FIRST
+
+
 def test_sketch_prefers_stroke_colours_and_preservation():
     j = MetricJudge()
     base = paint(paint(canvas(), disk(0.4), (220, 220, 210)), disk(0.15, 0.3, 0.3), (220, 220, 210))

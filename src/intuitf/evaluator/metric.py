@@ -618,13 +618,17 @@ def _clause_presence(f: _Features, name: str, mod: str | None) -> float:
         hued = np.clip((np.radians(30) - dh) / np.radians(30 - _ON_HUE), 0.0, 1.0) * (chroma > 20)
         return max(_saturating(near.mean(), _CLAUSE_SATURATION),
                    HUE_CREDIT * _saturating(hued.mean(), _CLAUSE_SATURATION))  # fmt: skip
-    tinted = (dh < np.radians(30)) & (chroma > 8)
+    # Graded by hue, as the solid case: fully on the colour's hue within _ON_HUE degrees,
+    # not at all beyond 30. Counted alike anywhere within 30 degrees, a faint red skin drifted
+    # to orange or pink over a long search (ΔE 12-15 after 12 generations) with nothing to
+    # pull it back.
+    tinted = np.clip((np.radians(30) - dh) / np.radians(30 - _ON_HUE), 0.0, 1.0) * (chroma > 8)
     if mod == "faint":
         # A faint layer lets the background through: darker (over a dark background) or
         # paler (over a light one) than the colour itself, never as strong.
         solid = np.linalg.norm(pix - target, axis=1) < _NAMED_DELTA_E * 0.6
         toward_bg = np.abs(pix[:, 0] - f.bg_lab[0]) < 0.8 * abs(target[0] - f.bg_lab[0])
-        tinted &= ~solid & toward_bg
+        tinted = tinted * (~solid & toward_bg)
     return _saturating(tinted.mean(), _CLAUSE_SATURATION * 1.5)
 
 
