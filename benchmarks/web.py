@@ -3,9 +3,9 @@ server's stills, on a real volume (the bonsai by default).
 
 Run: ``python benchmarks/web.py`` (options: ``--volume ID``, ``--data DIR`` (default
 ``$INTUITF_DATA`` or ``../shared/data/volumes``), ``--frames N``, ``--stills N``,
-``--quick``, ``--gl swiftshader|llvmpipe``). A real ``intuitf serve`` app runs in its own process on a free loopback port;
-this process drives headless Chromium (Debian's ``chromium``, Playwright) against it and asks
-the server for stills over the view socket.
+``--quick``, ``--gl swiftshader|llvmpipe``). A real ``intuitf serve`` app runs in its own
+process on a free loopback port; this process drives headless Chromium (Debian's
+``chromium``, Playwright) against it and asks the server for stills over the view socket.
 
 Every frame and still is from the view a person gets: the volume's own camera (upright,
 chosen for it: ``GET /api/volumes/{id}/camera``, the view its runs judge from), turning.
@@ -34,9 +34,9 @@ pixels):
 
 Headless Chromium here renders WebGL2 in software on the machine's cores: SwiftShader by
 default (``--disable-gpu``, as the tests run it), or Mesa's llvmpipe with ``--gl llvmpipe``
-(about twice as fast on the same shader here). Either way its figures bound any GPU's from
-above. The cost per sample lets one estimate a GPU: a laptop GPU
-does on the order of 10⁹–10¹⁰ samples a second where SwiftShader does about 10⁸.
+(the same shader at about 40 % of SwiftShader's cost per sample here). Either way its figures
+bound any GPU's from above. The cost per sample lets one estimate a GPU: a laptop GPU does on
+the order of 10⁹–10¹⁰ samples a second where SwiftShader does about 10⁸.
 
 Targets on the 2-core reference machine, in software: 256² frame ≤ 200 ms, 512² ≤ 600 ms,
 click → outline ≤ 300 ms, first picture ≤ 3 s; server 512² shaded still ≤ 500 ms idle.
