@@ -39,6 +39,31 @@ def test_a_dim_red_outline_around_ivory_reads_as_faint_red_skin_over_opaque_ivor
     assert "bone" not in words  # "bone white" would read as a material
 
 
+def test_layers_seen_through_each_other_are_read_as_their_own_colours():
+    """A faint red skin lies in front of the ivory bone, so the inside shows pink where the skin
+    is thick and nearly ivory where it is thin, and the outline band takes in bone too. Read as
+    the band's and the inside's means, the layers came out salmon and pinkish ivory, and a
+    search steered by them made pink skulls (a foot rendered from its labels read as (0.95,
+    0.47, 0.44) over (0.95, 0.82, 0.76))."""
+    size = 96
+    yy, xx = np.mgrid[:size, :size]
+    r = np.hypot(yy - size / 2, xx - size / 2)
+    red, ivory = np.array([0.86, 0.12, 0.12]), np.array([0.98, 0.96, 0.88])
+    img = np.zeros((size, size, 3))
+    img[r < 40] = 0.3 * red  # the skin alone, dimmed by its opacity
+    # The bone, off centre so that it reaches into the outline band on one side, seen through
+    # skin whose share grows from 0.05 to 0.5 across it.
+    bone = np.hypot(yy - size / 2, xx - size / 2 - 7) < 32
+    share = 0.05 + 0.45 * (xx - xx[bone].min()) / np.ptp(xx[bone])
+    img[bone] = share[bone, None] * red + (1 - share[bone, None]) * ivory
+    layers = reference_layers((img * 255).astype(np.uint8))
+    assert [(k, look) for k, _, look in layers] == [("outer", "faint"), ("inner", "opaque")]
+    outer, inner = (np.array(rgb) for _, rgb, _ in layers)
+    assert outer[0] > 0.9 and outer[1] < 0.2 and outer[2] < 0.2  # red, not salmon
+    # Near ivory: nearly as green as red (the pink mixtures fall short in green), no bluer.
+    assert inner[1] > 0.85 * inner[0] and inner[2] < inner[1]
+
+
 def test_one_colour_or_no_object_says_nothing_about_layers():
     assert reference_layers(_disc((200, 200, 190), (205, 200, 192))) == []
     assert reference_layers(np.zeros((64, 64, 3), np.uint8)) == []

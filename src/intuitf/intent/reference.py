@@ -49,12 +49,17 @@ def _nearest_name(rgb: np.ndarray) -> str:
 def outline_and_inside(
     image: np.ndarray, background: RGB | None = None
 ) -> tuple[np.ndarray, np.ndarray] | None:
-    """The mean colour (RGB, 0..1) of the object's outline band and of the brightest half of
-    its inside, as the picture shows them; None without an object big enough to have both.
+    """The colour (RGB, 0..1) of the object's outer layer, read at its outline, and of its
+    inner one, read inside, as the picture shows them; None without an object big enough to
+    have both.
 
     The object is what differs from ``background`` (default: the median colour of the
     picture's border); the outline band is its pixels within a few per cent of its size of
-    its edge, the inside what lies twice as deep.
+    its edge, the inside what lies twice as deep. The outer colour is the mean of the band's
+    dimmer half, the inner one the mean of the quarter of the inside's brighter half that the
+    outer colour tints least: layers seen through each other mix (red skin over ivory bone
+    shows pink), and the band's and the inside's plain means read such a foot as salmon over
+    pinkish ivory.
     """
     img = np.asarray(image)
     if img.ndim != 3 or img.shape[2] < 3 or min(img.shape[:2]) < 8:
@@ -80,8 +85,19 @@ def outline_and_inside(
     if edge.sum() < 16 or core.sum() < 16:
         return None
     value = np.abs(rgb - bg).max(axis=2)
+    # The band's dimmer half: where the outer layer alone lies on the ray (a faint skin seen
+    # edge-on); its brighter pixels are the inside showing through it.
+    band = rgb[edge][value[edge] <= np.median(value[edge])]
+    outline = band.mean(axis=0)
     inside = rgb[core][value[core] >= np.median(value[core])]
-    return rgb[edge].mean(axis=0), inside.mean(axis=0)
+    # Of the inside, the quarter least tinted by the outline's colour: the inner material
+    # where least of the outer layer lies in front of it.
+    hue = outline - outline.mean()
+    norm = float(np.linalg.norm(hue))
+    if norm > 1e-6:
+        tint = (inside - inside.mean(axis=1, keepdims=True)) @ (hue / norm)
+        inside = inside[tint <= np.percentile(tint, 25)]
+    return outline, inside.mean(axis=0)
 
 
 def reference_layers(
