@@ -50,8 +50,8 @@ def outline_and_inside(
     image: np.ndarray, background: RGB | None = None
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """The colour (RGB, 0..1) of the object's outer layer, read at its outline, and of its
-    inner one, read inside, as the picture shows them; None without an object big enough to
-    have both.
+    inner one, read inside (each as lit and dimmed in the picture, but apart from the other);
+    None without an object big enough to have both.
 
     The object is what differs from ``background`` (default: the median colour of the
     picture's border); the outline band is its pixels within a few per cent of its size of
