@@ -44,6 +44,23 @@ def test_camera_json_round_trip_and_validation():
     np.testing.assert_allclose(up, [0, 0, 1], atol=1e-12)
 
 
+@pytest.mark.parametrize("projection", ["perspective", "orthographic"])
+def test_a_view_projects_points_back_to_the_pixels_whose_rays_pass_through_them(projection):
+    """ViewFrame.rays and ViewFrame.project are inverses: a point on a pixel's ray projects to
+    that pixel's centre, at its distance along the view direction (perspective and
+    orthographic, panned, on a picture that is not square)."""
+    cam = Camera(azimuth=40.0, elevation=25.0, zoom=1.3, projection=projection, pan=(0.1, -0.05))
+    frame = cam.frame((40.0, 30.0, 20.0), 48, 32)
+    rows = np.array([0, 5, 17, 31])
+    cols = np.array([0, 40, 23, 47])
+    o, d = frame.rays(rows, cols)
+    t = np.array([20.0, 35.0, 50.0, 80.0])
+    row, col, depth = frame.project(o + t[:, None] * d)
+    np.testing.assert_allclose(row, rows, atol=1e-9)
+    np.testing.assert_allclose(col, cols, atol=1e-9)
+    np.testing.assert_allclose(depth, ((o + t[:, None] * d) - frame.eye) @ frame.forward)
+
+
 def test_renderer_rejects_bad_settings(neghip):
     with pytest.raises(RenderError):
         VolumeRenderer(neghip, size=0)

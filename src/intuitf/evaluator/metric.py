@@ -486,6 +486,8 @@ class MetricJudge:
         if not union.any():
             return 0.0
         overlap = float((mine & theirs).sum() / union.sum())
+        if overlap == 0.0:
+            return _layer_lightness(f, r)
         _, ssim = structural_similarity(f.gray128, r.gray128, data_range=1.0, full=True)
         return (1.0 - overlap) * _layer_lightness(f, r) + overlap * float(ssim[union].mean())
 

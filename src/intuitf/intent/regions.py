@@ -89,6 +89,8 @@ def owned(
     if not regions:
         return []
     cover = np.sum([r.mask for r in regions], axis=0)
+    if not (cover > 1).any():
+        return list(regions)
     h, w = regions[0].mask.shape
     depth = np.stack([front_depth(v, spacing, camera, (w, h)) for v in voxel_sets])
     front = np.argmin(depth, axis=0)
@@ -110,8 +112,6 @@ def front_depth(voxels: np.ndarray, spacing, camera, size: tuple[int, int]) -> n
     """
     from scipy import ndimage
 
-    from intuitf.render.camera import Camera
-
     w, h = size
     surface = voxels & ~ndimage.binary_erosion(voxels)
     zyx = np.argwhere(surface)
@@ -120,17 +120,11 @@ def front_depth(voxels: np.ndarray, spacing, camera, size: tuple[int, int]) -> n
         return out
     sp = np.asarray(spacing, dtype=np.float64)
     dims = np.array(voxels.shape[::-1])
-    frame = (camera or Camera()).frame(tuple((dims - 1) * sp), w, h)
-    world = zyx[:, ::-1] * sp
-    v = world - frame.eye
-    z = v @ frame.forward
-    x, y = v @ frame.right, v @ frame.up
-    if frame.perspective:
-        x, y = x / np.maximum(z, 1e-9), y / np.maximum(z, 1e-9)
-    j = ((x / frame.half_width + 1.0 + 2.0 * frame.pan[0]) * 0.5 * w - 0.5).round().astype(int)
-    i = ((1.0 - y / frame.half_height - 2.0 * frame.pan[1]) * 0.5 * h - 0.5).round().astype(int)
+    frame = camera.frame(tuple((dims - 1) * sp), w, h)
+    row, col, depth = frame.project(zyx[:, ::-1] * sp)
+    i, j = row.round().astype(int), col.round().astype(int)
     ok = (i >= 0) & (i < h) & (j >= 0) & (j < w)
-    np.minimum.at(out, (i[ok], j[ok]), z[ok])
+    np.minimum.at(out, (i[ok], j[ok]), depth[ok])
     return ndimage.minimum_filter(out, size=3, mode="nearest")
 
 

@@ -88,19 +88,7 @@ def strokes_of(sketch: np.ndarray, min_pixels: int = 6) -> list[tuple[tuple[int,
 
 def _rays(camera: Camera, extent, width: int, height: int, rows: np.ndarray, cols: np.ndarray):
     """Ray origins and unit directions (world units) through pixel centres (row, col)."""
-    f = camera.frame(tuple(extent), width, height)
-    sx = (2.0 * (cols + 0.5) / width - 1.0) - 2.0 * f.pan[0]
-    sy = (1.0 - 2.0 * (rows + 0.5) / height) - 2.0 * f.pan[1]
-    if f.perspective:
-        d = (f.forward[None] + sx[:, None] * f.half_width * f.right[None]
-             + sy[:, None] * f.half_height * f.up[None])  # fmt: skip
-        o = np.repeat(f.eye[None], len(rows), axis=0)
-    else:
-        o = (f.eye[None] + sx[:, None] * f.half_width * f.right[None]
-             + sy[:, None] * f.half_height * f.up[None])  # fmt: skip
-        d = np.repeat(f.forward[None], len(rows), axis=0)
-    d = d / np.linalg.norm(d, axis=1, keepdims=True)
-    return o, d
+    return camera.frame(tuple(extent), width, height).rays(rows, cols)
 
 
 def layer_values(

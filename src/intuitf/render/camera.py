@@ -192,6 +192,34 @@ class ViewFrame:
             dtype=np.float64,
         )
 
+    def rays(self, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World origins and unit directions (n, 3) of the rays through the centres of pixels
+        (row, col): the rays the kernels cast (``kernels._ray``)."""
+        sx = (2.0 * (np.asarray(cols) + 0.5) / self.width - 1.0) - 2.0 * self.pan[0]
+        sy = (1.0 - 2.0 * (np.asarray(rows) + 0.5) / self.height) - 2.0 * self.pan[1]
+        across = (sx[:, None] * self.half_width * self.right[None]
+                  + sy[:, None] * self.half_height * self.up[None])  # fmt: skip
+        if self.perspective:
+            d = self.forward[None] + across
+            o = np.repeat(self.eye[None], len(sx), axis=0)
+        else:
+            o = self.eye[None] + across
+            d = np.repeat(self.forward[None], len(sx), axis=0)
+        return o, d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(row, col, depth) of world points (n, 3): the pixel whose ray (:meth:`rays`) passes
+        through each, as fractional indices (a pixel's centre is a whole number), and its
+        distance along the view direction."""
+        v = np.asarray(points, dtype=np.float64) - self.eye
+        depth = v @ self.forward
+        x, y = v @ self.right, v @ self.up
+        if self.perspective:
+            x, y = x / np.maximum(depth, 1e-9), y / np.maximum(depth, 1e-9)
+        col = (x / self.half_width + 1.0 + 2.0 * self.pan[0]) * 0.5 * self.width - 0.5
+        row = (1.0 - y / self.half_height - 2.0 * self.pan[1]) * 0.5 * self.height - 0.5
+        return row, col, depth
+
     def vtk_view_angle(self) -> float:
         """VTK's vertical view angle (degrees) for the same perspective picture."""
         return math.degrees(2.0 * math.atan(self.half_height))
