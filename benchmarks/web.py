@@ -298,6 +298,12 @@ def browser_part(base: str, token: str, args, chromium: str, hist: dict) -> dict
             "a => Math.abs(window.intuitfDebug.state.camera.azimuth - a) < 0.01",
             arg=view["azimuth"],
         )
+        # Frames are measured once the page rests: its own follow-up work on the new view (the
+        # full-resolution frame, the attribution pass in bands, the features strip) would
+        # otherwise queue ahead of the first measured frames and be counted in them.
+        page.evaluate("window.intuitfDebug.gl.stats.prepared = undefined")
+        page.wait_for_function("() => window.intuitfDebug.gl.stats.prepared !== undefined")
+        page.wait_for_timeout(1500)
         out["camera"] = page.evaluate("window.intuitfDebug.state.camera")
         out["view size"] = page.evaluate("Number(document.getElementById('view-canvas').width)")
         for size in (256, 512):

@@ -167,8 +167,9 @@ export class GLVolumeRenderer {
 
   /** The render program for `kind` ({shading, gradient}), compiled once. */
   _program(kind) {
-    const full = { ...kind, shininess: DEFAULTS.shade[3] };
-    const key = `${kind.shading ? "s" : "u"}${kind.gradient ? "g" : "d"}${kind.packed ? "p" : ""}`;
+    const blockSize = this.blocks ? this.blocks.size : 8;
+    const full = { ...kind, shininess: DEFAULTS.shade[3], blockSize };
+    const key = `${kind.shading ? "s" : "u"}${kind.gradient ? "g" : "d"}${kind.packed ? "p" : ""}${blockSize}`;
     if (!this.progRender[key]) this.progRender[key] = program(this.gl, VERTEX, renderSource(full));
     return this.progRender[key];
   }
@@ -403,7 +404,9 @@ export class GLVolumeRenderer {
     if (!this.floatTargets) return null;
     const ng = Math.min(16, tf.gaussians.length);
     const targets = Math.ceil(ng / 4);
-    if (!this.progAttr[targets]) this.progAttr[targets] = program(gl, VERTEX, attributeSource(targets));
+    const akey = `${targets}:${this.blocks.size}`;
+    if (!this.progAttr[akey]) this.progAttr[akey] = program(gl, VERTEX, attributeSource(targets, this.blocks.size));
+
     const gMean = new Float32Array(16);
     const gWidth = new Float32Array(16).fill(1);
     const gHeight = new Float32Array(16);
@@ -425,7 +428,7 @@ export class GLVolumeRenderer {
     }
     gl.bindFramebuffer(gl.FRAMEBUFFER, null);
     const out = new Float32Array(ng * width * height);
-    return { tf, camera, width, height, sampleDistance, ng, targets, gMean, gWidth, gHeight, fb, texs, out };
+    return { tf, camera, width, height, sampleDistance, ng, targets, program: akey, gMean, gWidth, gHeight, fb, texs, out };
   }
 
   /** Rows [y0, y1) (from the bottom) of an attribution job: drawn, read back into job.out. */
@@ -433,7 +436,7 @@ export class GLVolumeRenderer {
     const gl = this.gl;
     const { width, height, ng, targets } = job;
     this._useTF(job.tf, job.sampleDistance);
-    const prog = this.progAttr[targets];
+    const prog = this.progAttr[job.program];
     gl.bindFramebuffer(gl.FRAMEBUFFER, job.fb);
     gl.drawBuffers(job.texs.map((_, i) => gl.COLOR_ATTACHMENT0 + i));
     // _common binds the LUT to texture unit 2 (after the targets exist: making a target binds

@@ -4,7 +4,8 @@
 // Same rays (ViewFrame packed), same box (voxel centres [0, n-1]), samples at t0 + k·dt from
 // box entry, trilinear value (the texture's linear filter), post-classification with linear
 // interpolation between LUT entries, front-to-back premultiplied compositing, early ray
-// termination at T < 1/255, empty-space skipping over 8³ blocks that keeps the sample grid,
+// termination at T < 1/255, empty-space skipping that keeps the sample grid (over blocks of 2–16
+// cells, a jump across a whole cube of empty ones where the grid allows: gl_volume.visibleBlocks),
 // and Blinn–Phong with a two-sided headlight from the gradient: the server's precomputed
 // central differences as an 8-bit texture, trilinearly filtered, once the page has built it
 // (until then the central difference of the trilinear field at ±1 voxel, which equals it inside
@@ -24,8 +25,11 @@ const MARCH = `  if (t.y >= t.x) {
       // with no bookkeeping per sample (a sample just past its exit lies in a neighbour's
       // cells, whose value range then holds it: an invisible neighbour gives it alpha 0).
       ivec3 b = blockOf(oi + (t.x + float(k) * u_dt) * di);
-      int kn = skipBlock(b, oi, di, t.x, k);
-      if (texelFetch(u_vis, b, 0).r < 0.5) {
+      // 0: a visible block; r > 0: every block within r - 1 of this one is empty, and the ray
+      // leaves that cube at once (gl_volume.visibleBlocks).
+      int r = int(texelFetch(u_vis, b, 0).r * 255.0 + 0.5);
+      int kn = skipCube(b, max(r - 1, 0), oi, di, t.x, k);
+      if (r > 0) {
         k = kn;
         continue;
       }
@@ -47,7 +51,7 @@ precision highp sampler3D;
 precision highp sampler2D;
 
 uniform sampler3D u_vol;   // R8 (original bytes) or R16F (normalised values), linear filter
-uniform sampler3D u_vis;   // R8 per block: visible (1) or skipped (0), nearest
+uniform sampler3D u_vis;   // R8 per block: 0 visible, else its jump distance / 255, nearest
 uniform sampler2D u_lut;   // RGBA32F (L × 1), straight colour, linear filter
 uniform vec3 u_dims;       // nx, ny, nz
 uniform vec3 u_invDims;    // 1 / (nx, ny, nz)
@@ -65,7 +69,6 @@ uniform vec4 u_view;       // half width, half height, pan x, pan y
 uniform vec2 u_size;       // picture width, height
 uniform int u_persp;
 
-const int BSIZE = 8;
 
 // textureLod, not texture: no implicit derivatives to work out (software rasterisers do).
 float value(vec3 p) {
@@ -107,16 +110,18 @@ void pixelRay(out vec3 o, out vec3 d) {
   }
 }
 
-// The first sample index at or after the exit of the block that holds p (kernels.march).
-int skipBlock(ivec3 b, vec3 oi, vec3 di, float t0, int k) {
+// The first sample index at or after the exit of the cube of blocks within r of block b (r = 0:
+// the block itself, as kernels.march skips one).
+int skipCube(ivec3 b, int r, vec3 oi, vec3 di, float t0, int k) {
   float tex = 1e30;
-  float bs = float(BSIZE);
-  if (di.x > 1e-12) tex = min(tex, (float(b.x + 1) * bs - oi.x) / di.x);
-  else if (di.x < -1e-12) tex = min(tex, (float(b.x) * bs - oi.x) / di.x);
-  if (di.y > 1e-12) tex = min(tex, (float(b.y + 1) * bs - oi.y) / di.y);
-  else if (di.y < -1e-12) tex = min(tex, (float(b.y) * bs - oi.y) / di.y);
-  if (di.z > 1e-12) tex = min(tex, (float(b.z + 1) * bs - oi.z) / di.z);
-  else if (di.z < -1e-12) tex = min(tex, (float(b.z) * bs - oi.z) / di.z);
+  vec3 lo = vec3(b - r) * float(BSIZE);
+  vec3 hi = vec3(b + r + 1) * float(BSIZE);
+  if (di.x > 1e-12) tex = min(tex, (hi.x - oi.x) / di.x);
+  else if (di.x < -1e-12) tex = min(tex, (lo.x - oi.x) / di.x);
+  if (di.y > 1e-12) tex = min(tex, (hi.y - oi.y) / di.y);
+  else if (di.y < -1e-12) tex = min(tex, (lo.y - oi.y) / di.y);
+  if (di.z > 1e-12) tex = min(tex, (hi.z - oi.z) / di.z);
+  else if (di.z < -1e-12) tex = min(tex, (lo.z - oi.z) / di.z);
   int kn = int(ceil((tex - t0) / u_dt - 1e-4));
   return kn > k ? kn : k + 1;
 }
@@ -153,10 +158,12 @@ function specularPower(n) {
  * volume texture). Each kind is its own program: a software rasteriser runs a branch on a
  * uniform inside the loop at a real cost, a constant one not at all. `packed`: the gradient
  * texture also holds the 8-bit value (alpha), so a shaded sample is one fetch in all.
- * `shininess`: the specular exponent, built in (see specularPower).
+ * `shininess`: the specular exponent, built in (see specularPower). `blockSize`: the edge (cells)
+ * of the empty-space-skipping grid (gl_volume.blockSize), built in.
  */
-export function renderSource({ shading, gradient, packed = false, shininess = null }) {
+export function renderSource({ shading, gradient, packed = false, shininess = null, blockSize = 8 }) {
   return `#version 300 es
+#define BSIZE ${blockSize}
 #define SHADING ${shading ? 1 : 0}
 #define GRADIENT_TEXTURE ${gradient ? 1 : 0}
 #define PACKED_VALUE ${packed ? 1 : 0}
@@ -232,11 +239,13 @@ ${MARCH}#if PACKED_VALUE
  * Per-feature attribution (kernels.attribute over the sample cache's nearest-entry samples):
  * each Gaussian's part of the pixel's accumulated opacity, four Gaussians per RGBA target.
  * `groups` (1–4) is how many targets: the source is made for it, with the Gaussians in vec4s
- * (no arrays indexed at run time, which software rasterisers keep in memory).
+ * (no arrays indexed at run time, which software rasterisers keep in memory). `blockSize` as
+ * renderSource's.
  */
-export function attributeSource(groups) {
+export function attributeSource(groups, blockSize = 8) {
   const g = [0, 1, 2, 3].slice(0, groups);
   return `#version 300 es
+#define BSIZE ${blockSize}
 ${COMMON}
 uniform vec4 u_mean[4];
 uniform vec4 u_width[4];   // unused slots: width 1, height 0
