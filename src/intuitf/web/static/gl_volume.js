@@ -120,8 +120,7 @@ export function blockCount(n, b) {
  */
 export async function blockRanges(vol, size = blockSize(vol.dims)) {
   const [nx, ny, nz] = vol.dims;
-  const BLOCK_SIZE = size;
-  const nb = [blockCount(nx, BLOCK_SIZE), blockCount(ny, BLOCK_SIZE), blockCount(nz, BLOCK_SIZE)];
+  const nb = [blockCount(nx, size), blockCount(ny, size), blockCount(nz, size)];
   const nBlocks = nb[0] * nb[1] * nb[2];
   const bmin = new Float32Array(nBlocks).fill(Infinity);
   const bmax = new Float32Array(nBlocks).fill(-Infinity);
@@ -131,10 +130,10 @@ export async function blockRanges(vol, size = blockSize(vol.dims)) {
   const rowMax = new Float32Array(nb[0]);
   // The blocks (along one axis) that voxel i belongs to: floor(i / B) and, on a boundary, the one before.
   const owners = (i, n) => {
-    const b = Math.floor(i / BLOCK_SIZE);
+    const b = Math.floor(i / size);
     const out = [];
     if (b < n) out.push(b);
-    if (i % BLOCK_SIZE === 0 && b > 0) out.push(b - 1);
+    if (i % size === 0 && b > 0) out.push(b - 1);
     return out;
   };
   const yOwners = Array.from({ length: ny }, (_, y) => owners(y, nb[1]));
@@ -146,8 +145,8 @@ export async function blockRanges(vol, size = blockSize(vol.dims)) {
       rowMax.fill(-Infinity);
       const base = (z * ny + y) * nx;
       for (let bx = 0; bx < nb[0]; bx++) {
-        const x0 = bx * BLOCK_SIZE;
-        const x1 = Math.min(x0 + BLOCK_SIZE, nx - 1);
+        const x0 = bx * size;
+        const x1 = Math.min(x0 + size, nx - 1);
         let lo = Infinity;
         let hi = -Infinity;
         for (let x = x0; x <= x1; x++) {
@@ -179,7 +178,7 @@ export async function blockRanges(vol, size = blockSize(vol.dims)) {
     bmin[i] = bmin[i] * scale + offset;
     bmax[i] = bmax[i] * scale + offset;
   }
-  return { nb, size: BLOCK_SIZE, min: bmin, max: bmax };
+  return { nb, size, min: bmin, max: bmax };
 }
 
 /**
