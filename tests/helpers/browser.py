@@ -142,6 +142,32 @@ def start_server(root: Path) -> WebServer:
     return server
 
 
+def start_server_with(root: Path, volumes: list[str]) -> WebServer:
+    """``start_server`` offering ``volumes`` (file names in the real-volume folder) as well,
+    those of them that are there."""
+    from helpers.data import DATA, data_dir
+
+    server = start_server(root)
+    if data_dir() is not None:
+        for name in volumes:
+            if (DATA / name).exists():
+                (root / "data" / name).symlink_to(DATA / name)  # --data is rescanned on each list
+    return server
+
+
+def open_app(chromium, url: str, width: int = 1440, height: int = 900):
+    """Headless Chromium at the app's ``url``, ready: (browser, page). The page's uncaught
+    errors collect in ``page.errors``."""
+    b = chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
+    page = b.new_page(viewport={"width": width, "height": height})
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(url)
+    page.wait_for_selector("body.ready")
+    page.errors = errors
+    return b, page
+
+
 def stop_server(server: WebServer) -> None:
     """Ctrl-C, as a person would: running runs stop between matches and are kept."""
     proc = server.proc

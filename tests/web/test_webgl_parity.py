@@ -15,7 +15,7 @@ import json
 import numpy as np
 import pytest
 
-from helpers.browser import CHROMIUM, CHROMIUM_ARGS, skip_reason, start_server, stop_server
+from helpers.browser import open_app, skip_reason, start_server_with, stop_server
 from helpers.data import DATA, data_dir
 
 pytestmark = pytest.mark.slow
@@ -71,10 +71,7 @@ def server(tmp_path_factory):
         pytest.skip(reason)
     if data_dir() is None:
         pytest.skip(f"the real volumes are not in {DATA} (set INTUITF_DATA)")
-    root = tmp_path_factory.mktemp("webgl")
-    srv = start_server(root)
-    for name in CASES:
-        (root / "data" / name).symlink_to(DATA / name)  # --data is rescanned on each list
+    srv = start_server_with(tmp_path_factory.mktemp("webgl"), list(CASES))
     yield srv
     stop_server(srv)
 
@@ -84,13 +81,7 @@ def gl_page(server):
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
-        page = b.new_page(viewport={"width": 1200, "height": 800})
-        errors: list[str] = []
-        page.on("pageerror", lambda e: errors.append(str(e)))
-        page.goto(server.url)
-        page.wait_for_selector("body.ready")
-        page.errors = errors  # type: ignore[attr-defined]
+        b, page = open_app(pw.chromium, server.url, 1200, 800)
         yield page
         b.close()
 

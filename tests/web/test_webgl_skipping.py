@@ -13,7 +13,7 @@ import base64
 import numpy as np
 import pytest
 
-from helpers.browser import CHROMIUM, CHROMIUM_ARGS, skip_reason, start_server, stop_server
+from helpers.browser import open_app, skip_reason, start_server_with, stop_server
 from helpers.data import DATA, data_dir
 
 pytestmark = pytest.mark.slow
@@ -81,18 +81,9 @@ def page(tmp_path_factory):
     reason = skip_reason()
     if reason:
         pytest.skip(reason)
-    root = tmp_path_factory.mktemp("skipping")
-    srv = start_server(root)
-    if data_dir() is not None:
-        (root / "data" / BONSAI).symlink_to(DATA / BONSAI)
+    srv = start_server_with(tmp_path_factory.mktemp("skipping"), [BONSAI])
     with sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
-        pg = b.new_page()
-        errors: list[str] = []
-        pg.on("pageerror", lambda e: errors.append(str(e)))
-        pg.goto(srv.url)
-        pg.wait_for_selector("body.ready")
-        pg.errors = errors  # type: ignore[attr-defined]
+        b, pg = open_app(pw.chromium, srv.url, 800, 600)
         yield pg
         b.close()
     stop_server(srv)
