@@ -253,6 +253,26 @@ def main() -> None:
     report(args, res, load_before, os.getloadavg())
 
 
+#: In the page: what changes while the page works on its view (frames drawn, attribution passes).
+ACTIVITY_JS = """() => [document.getElementById('view-canvas').dataset.frames,
+  document.getElementById('view-canvas').dataset.quality,
+  window.intuitfDebug.gl.stats.attributionPasses]"""
+
+
+def wait_until_rested(page, quiet_s: float = 1.5, limit_s: float = 120.0) -> None:
+    """Until the page has drawn no frame and run no attribution pass for ``quiet_s`` and its
+    view is at full resolution (or ``limit_s`` passed)."""
+    end = time.monotonic() + limit_s
+    last, since = None, time.monotonic()
+    while time.monotonic() < end:
+        now = page.evaluate(ACTIVITY_JS)
+        if now != last:
+            last, since = now, time.monotonic()
+        elif now[1] == "full" and time.monotonic() - since >= quiet_s:
+            return
+        page.wait_for_timeout(250)
+
+
 def browser_part(base: str, token: str, args, chromium: str, hist: dict) -> dict:
     from playwright.sync_api import sync_playwright
 
@@ -301,9 +321,7 @@ def browser_part(base: str, token: str, args, chromium: str, hist: dict) -> dict
         # Frames are measured once the page rests: its own follow-up work on the new view (the
         # full-resolution frame, the attribution pass in bands, the features strip) would
         # otherwise queue ahead of the first measured frames and be counted in them.
-        page.evaluate("window.intuitfDebug.gl.stats.prepared = undefined")
-        page.wait_for_function("() => window.intuitfDebug.gl.stats.prepared !== undefined")
-        page.wait_for_timeout(1500)
+        wait_until_rested(page)
         out["camera"] = page.evaluate("window.intuitfDebug.state.camera")
         out["view size"] = page.evaluate("Number(document.getElementById('view-canvas').width)")
         for size in (256, 512):
