@@ -406,7 +406,6 @@ export class GLVolumeRenderer {
     const targets = Math.ceil(ng / 4);
     const akey = `${targets}:${this.blocks.size}`;
     if (!this.progAttr[akey]) this.progAttr[akey] = program(gl, VERTEX, attributeSource(targets, this.blocks.size));
-
     const gMean = new Float32Array(16);
     const gWidth = new Float32Array(16).fill(1);
     const gHeight = new Float32Array(16);
