@@ -1,9 +1,10 @@
 """The page's empty-space skipping: jumps over empty blocks never skip a visible sample.
 
-The page marks each block of its skipping grid with a jump distance (gl_volume.visibleBlocks):
-a ray at a block with distance r leaves the whole cube of blocks within r - 1 at once. A
-distance that is too large would skip visible samples; these tests check the distances
-against the exact ones, and that the picture does not depend on the grid at all.
+The page marks each block of its skipping grid (gl_volume.visibleBlocks) with a jump distance
+(a ray leaves the whole cube of empty blocks around it at once) or, in visible fog, a run (a
+ray samples a whole cube of visible blocks with no lookup in between). A jump too long would
+skip visible samples; these tests check the jumps and the runs against the exact distances,
+and that the picture does not depend on the grid at all.
 """
 
 from __future__ import annotations
@@ -20,13 +21,15 @@ pytestmark = pytest.mark.slow
 
 BONSAI = "bonsai_256x256x256_uint8.raw.gz"
 
-#: Runs in the page: random block ranges, a LUT visible on one value band; every jump
-#: distance against the exact chessboard distance to the nearest visible block.
+#: Runs in the page: random block ranges, a LUT visible on one value band; every jump and
+#: every visible run against the exact chessboard distances to the nearest visible block and
+#: to the nearest empty one.
 DISTANCES = """() => import('/static/gl_volume.js').then(V => {
   let seed = 7;
   const rand = () => (seed = (seed * 16807) % 2147483647) / 2147483647;
   const out = [];
-  for (const [nb, share] of [[[37, 23, 41], 0.004], [[20, 31, 17], 0.03], [[64, 8, 9], 0.0]]) {
+  const cases = [[[37, 23, 41], 0.004], [[20, 31, 17], 0.03], [[64, 8, 9], 0.0], [[30, 20, 25], 0.97]];
+  for (const [nb, share] of cases) {
     const n = nb[0] * nb[1] * nb[2];
     const min = new Float32Array(n), max = new Float32Array(n);
     for (let i = 0; i < n; i++) {
@@ -38,18 +41,27 @@ DISTANCES = """() => import('/static/gl_volume.js').then(V => {
     for (let k = 0; k < 256; k++) occ[k + 1] = occ[k] + (k >= 100 && k <= 120 ? 1 : 0);
     const r = V.visibleBlocks({ nb, size: 2, min, max }, occ);
     const at = (i) => [i % nb[0], Math.floor(i / nb[0]) % nb[1], Math.floor(i / (nb[0] * nb[1]))];
-    const vis = [];
-    for (let i = 0; i < n; i++) if (min[i] > 0.2) vis.push(at(i));
-    let tooFar = 0, wrongVisible = 0, jumps = 0;
+    const vis = [], empty = [];
+    for (let i = 0; i < n; i++) (min[i] > 0.2 ? vis : empty).push(at(i));
+    const nearest = (p, set) => {
+      let best = 255;
+      for (const q of set) best = Math.min(best, Math.max(Math.abs(p[0] - q[0]), Math.abs(p[1] - q[1]), Math.abs(p[2] - q[2])));
+      return best;
+    };
+    let tooFar = 0, runTooFar = 0, wrongVisible = 0, jumps = 0, runs = 0;
     for (let i = 0; i < n; i++) {
-      const [x, y, z] = at(i);
-      let exact = 255;
-      for (const q of vis) exact = Math.min(exact, Math.max(Math.abs(x - q[0]), Math.abs(y - q[1]), Math.abs(z - q[2])));
-      if ((r[i] === 0) !== (exact === 0)) wrongVisible++;
-      if (r[i] > exact) tooFar++;
-      if (r[i] > 1) jumps++;
+      const p = at(i);
+      const isVisible = r[i] === 0 || r[i] >= 128;
+      if (isVisible !== (min[i] > 0.2)) wrongVisible++;
+      if (!isVisible) {
+        if (r[i] > nearest(p, vis)) tooFar++;
+        if (r[i] > 1) jumps++;
+      } else if (r[i] > 128) {
+        if (r[i] - 128 > nearest(p, empty) - 1) runTooFar++;
+        runs++;
+      }
     }
-    out.push({ blocks: n, visible: vis.length, tooFar, wrongVisible, jumps });
+    out.push({ blocks: n, visible: vis.length, tooFar, runTooFar, wrongVisible, jumps, runs });
   }
   return out;
 })"""
@@ -89,13 +101,16 @@ def page(tmp_path_factory):
     stop_server(srv)
 
 
-def test_jump_distances_never_reach_a_visible_block(page):
+def test_jumps_never_reach_a_visible_block_nor_runs_an_empty_one(page):
     cases = page.evaluate(DISTANCES)
     for case in cases:
         assert case["tooFar"] == 0, case
+        assert case["runTooFar"] == 0, case
         assert case["wrongVisible"] == 0, case
     assert cases[0]["jumps"] > 0  # sparse visible blocks: rays jump over empty cubes
     assert cases[2]["visible"] == 0 and cases[2]["jumps"] > 0  # nothing visible at all
+    assert cases[0]["runs"] == 0  # few visible blocks: no runs worked out
+    assert cases[3]["runs"] > 0  # visible fog: rays run through cubes of visible blocks
 
 
 def test_the_picture_does_not_depend_on_the_skipping_grid(page):

@@ -25,11 +25,13 @@ const MARCH = `  if (t.y >= t.x) {
       // with no bookkeeping per sample (a sample just past its exit lies in a neighbour's
       // cells, whose value range then holds it: an invisible neighbour gives it alpha 0).
       ivec3 b = blockOf(oi + (t.x + float(k) * u_dt) * di);
-      // 0: a visible block; r > 0: every block within r - 1 of this one is empty, and the ray
-      // leaves that cube at once (gl_volume.visibleBlocks).
-      int r = int(texelFetch(u_vis, b, 0).r * 255.0 + 0.5);
-      int kn = skipCube(b, max(r - 1, 0), oi, di, t.x, k);
-      if (r > 0) {
+      // gl_volume.visibleBlocks: v in 1..127, every block within v - 1 of this one is empty
+      // and the ray leaves that cube at once; 0, a visible block; 128 + q, a visible block in
+      // a cube of visible ones q blocks around it, whose samples run with no lookup between.
+      int v = int(texelFetch(u_vis, b, 0).r * 255.0 + 0.5);
+      bool empty = v > 0 && v < 128;
+      int kn = skipCube(b, empty ? v - 1 : max(v - 128, 0), oi, di, t.x, k);
+      if (empty) {
         k = kn;
         continue;
       }
@@ -51,7 +53,7 @@ precision highp sampler3D;
 precision highp sampler2D;
 
 uniform sampler3D u_vol;   // R8 (original bytes) or R16F (normalised values), linear filter
-uniform sampler3D u_vis;   // R8 per block: 0 visible, else its jump distance / 255, nearest
+uniform sampler3D u_vis;   // R8 per block (gl_volume.visibleBlocks's byte / 255), nearest
 uniform sampler2D u_lut;   // RGBA32F (L × 1), straight colour, linear filter
 uniform vec3 u_dims;       // nx, ny, nz
 uniform vec3 u_invDims;    // 1 / (nx, ny, nz)
