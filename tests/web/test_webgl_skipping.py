@@ -51,13 +51,14 @@ DISTANCES = """() => import('/static/gl_volume.js').then(V => {
     let tooFar = 0, runTooFar = 0, wrongVisible = 0, jumps = 0, runs = 0;
     for (let i = 0; i < n; i++) {
       const p = at(i);
-      const isVisible = r[i] === 0 || r[i] >= 128;
+      const isVisible = r[i] < 128;
+      const reach = r[i] & 127; // blocks around it, all like it
       if (isVisible !== (min[i] > 0.2)) wrongVisible++;
       if (!isVisible) {
-        if (r[i] > nearest(p, vis)) tooFar++;
-        if (r[i] > 1) jumps++;
-      } else if (r[i] > 128) {
-        if (r[i] - 128 > nearest(p, empty) - 1) runTooFar++;
+        if (reach > nearest(p, vis) - 1) tooFar++;
+        if (reach > 0) jumps++;
+      } else if (reach > 0) {
+        if (reach > nearest(p, empty) - 1) runTooFar++;
         runs++;
       }
     }

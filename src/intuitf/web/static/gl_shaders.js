@@ -25,13 +25,12 @@ const MARCH = `  if (t.y >= t.x) {
       // with no bookkeeping per sample (a sample just past its exit lies in a neighbour's
       // cells, whose value range then holds it: an invisible neighbour gives it alpha 0).
       ivec3 b = blockOf(oi + (t.x + float(k) * u_dt) * di);
-      // gl_volume.visibleBlocks: v in 1..127, every block within v - 1 of this one is empty
-      // and the ray leaves that cube at once; 0, a visible block; 128 + q, a visible block in
-      // a cube of visible ones q blocks around it, whose samples run with no lookup between.
+      // gl_volume.visibleBlocks: 128 + q, every block within q of this one is empty and the
+      // ray leaves that cube at once; q < 128, the blocks within q are visible and the ray
+      // runs the samples of that cube with no lookup in between.
       int v = int(texelFetch(u_vis, b, 0).r * 255.0 + 0.5);
-      bool empty = v > 0 && v < 128;
-      int kn = skipCube(b, empty ? v - 1 : max(v - 128, 0), oi, di, t.x, k);
-      if (empty) {
+      int kn = skipCube(b, v & 127, oi, di, t.x, k);
+      if (v >= 128) {
         k = kn;
         continue;
       }

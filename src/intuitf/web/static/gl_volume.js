@@ -183,16 +183,16 @@ export async function blockRanges(vol, size = blockSize(vol.dims)) {
 
 /**
  * Per block, what a ray does there: one byte, x fastest (Uint8Array).
- * - 1..127 (r): the block is empty, and so is every block within r - 1 of it (chessboard
- *   distance, in blocks): the ray leaves that whole cube in one step.
- * - 0: the block is visible (its LUT index range [floor(min·(L-1)), ceil(max·(L-1))] holds an
- *   entry with non-zero alpha; `occ` from gl_tf.occupancy): the ray runs its samples.
- * - 128 + q: visible, and so is every block within q of it: the ray runs the samples of that
- *   whole cube with no lookup in between (a volume filled with visible fog costs a lookup per
- *   cube, not per block). Worked out only when more than RUN_SHARE of the blocks are visible.
- * Both distances are lower bounds worked out on a coarse grid (COARSE blocks a side, cheap at
+ * - 128 + q: the block is empty (its LUT index range [floor(min·(L-1)), ceil(max·(L-1))] holds
+ *   no entry with non-zero alpha; `occ` from gl_tf.occupancy), and so is every block within q
+ *   of it (chessboard distance, in blocks): the ray leaves that whole cube in one step.
+ * - q < 128: the block is visible, and so is every block within q of it: the ray runs the
+ *   samples of that whole cube with no lookup in between (a volume filled with visible fog
+ *   costs a lookup per cube, not per block). Runs are worked out only when more than
+ *   RUN_SHARE of the blocks are visible (else q = 0: block by block).
+ * Both reaches are lower bounds worked out on a coarse grid (COARSE blocks a side, cheap at
  * every TF change): a coarse block at chessboard distance R from the nearest coarse block
- * with a visible block in it gives its empty blocks r = COARSE·(R - 1) + 1; one at distance R
+ * with a visible block in it gives its empty blocks q = COARSE·(R - 1); one at distance R
  * from the nearest with an empty block gives its visible blocks q = COARSE·(R - 1). A jump
  * too long would skip visible samples; a run too long only samples empty space.
  */
@@ -215,7 +215,7 @@ export function visibleBlocks(blocks, occ, out) {
           coarse[crow + ((x / COARSE) | 0)] = 0;
           visible++;
         } else {
-          r[i] = 1;
+          r[i] = EMPTY;
           solid[crow + ((x / COARSE) | 0)] = 0;
         }
       }
@@ -230,8 +230,8 @@ export function visibleBlocks(blocks, occ, out) {
       for (let x = 0; x < nx; x++, i++) {
         const c = crow + ((x / COARSE) | 0);
         if (r[i]) {
-          if (coarse[c] > 1) r[i] = Math.min(MAX_JUMP, COARSE * (coarse[c] - 1) + 1);
-        } else if (runs && solid[c] > 1) r[i] = 128 + Math.min(127, COARSE * (solid[c] - 1));
+          if (coarse[c] > 1) r[i] = EMPTY + Math.min(MAX_REACH, COARSE * (coarse[c] - 1));
+        } else if (runs && solid[c] > 1) r[i] = Math.min(MAX_REACH, COARSE * (solid[c] - 1));
       }
     }
   }
@@ -263,8 +263,11 @@ function lutRanges(blocks, L) {
 /** Visible runs are worked out when more than this share of the blocks is visible. */
 export const RUN_SHARE = 0.25;
 
-/** Largest jump distance a block records (the byte's values under 128). */
-export const MAX_JUMP = 127;
+/** The byte's high bit: the block is empty. */
+export const EMPTY = 128;
+
+/** Largest reach (blocks) the byte records. */
+export const MAX_REACH = 127;
 
 /**
  * In place: each cell's chessboard (L∞) distance, in cells, to the nearest zero cell (capped
