@@ -86,11 +86,6 @@ def strokes_of(sketch: np.ndarray, min_pixels: int = 6) -> list[tuple[tuple[int,
     return out
 
 
-def _rays(camera: Camera, extent, width: int, height: int, rows: np.ndarray, cols: np.ndarray):
-    """Ray origins and unit directions (world units) through pixel centres (row, col)."""
-    return camera.frame(tuple(extent), width, height).rays(rows, cols)
-
-
 def layer_values(
     data: np.ndarray,
     spacing: tuple[float, float, float],
@@ -110,7 +105,7 @@ def layer_values(
     shape_xyz = np.asarray(data.shape[::-1], dtype=np.float64)
     extent = (shape_xyz - 1.0) * sp
     width, height = size
-    o, d = _rays(camera, extent, width, height, rows, cols)
+    o, d = camera.frame(tuple(extent), width, height).rays(rows, cols)
     step = 0.5 * float(sp.min())
     # Where each ray is inside the box (slab method), then samples along it.
     inv = 1.0 / np.where(np.abs(d) < 1e-12, 1e-12, d)
