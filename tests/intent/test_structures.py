@@ -104,3 +104,27 @@ def test_the_engines_outer_part_is_its_casing_at_any_loaded_size(max_dim):
     # Looked at in slices: the casing 0.28-0.62, the dense inner parts above 0.66.
     assert 0.28 < by["outer part"].center < 0.62
     assert by["inner part"].center > 0.66
+
+
+@pytest.mark.parametrize(
+    ("name", "bone_from", "max_dim"),
+    [
+        # Looked at in slices: the chest's ribs and spine above 0.42, the head's skull above 0.53.
+        ("chestlidc2_256x256x133_uint8.raw.gz", 0.42, 64),
+        ("chestlidc2_256x256x133_uint8.raw.gz", 0.42, None),
+        ("ctheadstanford_256x256x113_uint16.raw.gz", 0.53, 64),
+        ("ctheadstanford_256x256x113_uint16.raw.gz", 0.53, None),
+    ],
+)
+def test_bone_is_the_bone_not_the_soft_tissue_around_it(name, bone_from, max_dim):
+    """Ivory bone on a CT: the soft tissue is the body's main material and not the lowest
+    one when a thin material of blurred edges (or the patient table) lies below it; with
+    nothing else against it, its share won "bone" over the ribs and the skull."""
+    from intuitf.volume import load_volume
+
+    if not (DATA / name).exists():
+        pytest.skip("no data")
+    vol = load_volume(DATA / name, max_dim=max_dim)
+    th = intent_hints(Intent(kind="text", text="ivory bone and faint red skin"), vol)
+    bone = next(h for h in th.hints if h.material == "bone")
+    assert bone.placed_by == "structure" and bone.center > bone_from

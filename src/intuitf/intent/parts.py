@@ -106,8 +106,12 @@ def _skin(s, c):
 
 
 def _bone(s, c):
+    # Bone is denser than the body around it, never the body itself: the material with most
+    # voxels is the soft tissue (at 64³ the head's blurred skin edge, a thin low material, made
+    # the soft tissue "not the lowest" and its 81 % won "bone" over the skull).
     return (1.5 * (1.0 if 0.0 < c.rank(s) else 0.0) + 0.8 * min(1.0, 10 * s.share)
-            + 0.5 * _shape(s, "thin", "branching", "elongated", "plate") - 0.3 * c.rank(s))  # fmt: skip
+            + 0.5 * _shape(s, "thin", "branching", "elongated", "plate") - 0.3 * c.rank(s)
+            - 1.0 * (s.material == c.main))  # fmt: skip
 
 
 def _vessel(s, c):
