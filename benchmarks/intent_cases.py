@@ -37,6 +37,8 @@ judge that recognises every structure). Cases:
     foot-head    ... and for the head
     engine       "light blue translucent outer part and orange solid inner part"
     foot         "opaque ivory bone and faint red skin"
+    chest        the same words on the chest CT (its ribs are bone: "bone" once went to the
+                 soft tissue, the body's main material)
 
     python benchmarks/intent_cases.py                      # all cases, both judges
     python benchmarks/intent_cases.py --quick --judge metric --cases bonsai,engine
@@ -387,6 +389,8 @@ CASES = [
     Case("engine", "engine", "light blue translucent outer part and orange solid inner part",
          {"outer part": ("light blue", "faint"), "inner part": ("orange", "opaque")}),
     Case("foot", "foot", "opaque ivory bone and faint red skin",
+         {"bone": ("ivory", "opaque"), "skin": ("red", "faint")}),
+    Case("chest", "chest", "opaque ivory bone and faint red skin",
          {"bone": ("ivory", "opaque"), "skin": ("red", "faint")}),
 ]  # fmt: skip
 
