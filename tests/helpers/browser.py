@@ -155,11 +155,24 @@ def start_server_with(root: Path, volumes: list[str]) -> WebServer:
     return server
 
 
-def open_app(chromium, url: str, width: int = 1440, height: int = 900):
-    """Headless Chromium at the app's ``url``, ready: (browser, page). The page's uncaught
-    errors collect in ``page.errors``."""
-    b = chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
+def open_app(
+    chromium,
+    url: str,
+    width: int = 1440,
+    height: int = 900,
+    *,
+    extra_args=(),
+    timeout_ms: float | None = None,
+):
+    """Headless Chromium (with ``extra_args`` beside the usual ones) at the app's ``url``,
+    ready: (browser, page). The page's uncaught errors collect in ``page.errors``;
+    ``timeout_ms`` is the page's default timeout (Playwright's own when None)."""
+    b = chromium.launch(
+        executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS + list(extra_args)
+    )
     page = b.new_page(viewport={"width": width, "height": height})
+    if timeout_ms is not None:
+        page.set_default_timeout(timeout_ms)
     errors: list[str] = []
     page.on("pageerror", lambda e: errors.append(str(e)))
     page.goto(url)

@@ -6,14 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from helpers.browser import (
-    CHROMIUM,
-    CHROMIUM_ARGS,
-    show_run,
-    skip_reason,
-    start_server,
-    stop_server,
-)
+from helpers.browser import open_app, show_run, skip_reason, start_server_with, stop_server
 from helpers.data import DATA, data_dir
 
 pytestmark = pytest.mark.slow
@@ -26,10 +19,7 @@ def server(tmp_path_factory):
     reason = skip_reason()
     if reason:
         pytest.skip(reason)
-    root = tmp_path_factory.mktemp("glview")
-    srv = start_server(root)
-    if data_dir() is not None and (DATA / NEGHIP).exists():
-        (root / "data" / NEGHIP).symlink_to(DATA / NEGHIP)
+    srv = start_server_with(tmp_path_factory.mktemp("glview"), [NEGHIP])
     yield srv
     stop_server(srv)
 
@@ -43,16 +33,8 @@ def chromium():
 
 
 def open_page(chromium, server, extra_args=()):
-    b = chromium.launch(
-        executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS + list(extra_args)
-    )
-    page = b.new_page(viewport={"width": 1440, "height": 900})
-    page.set_default_timeout(90_000)
-    errors: list[str] = []
-    page.on("pageerror", lambda e: errors.append(str(e)))
-    page.goto(server.url)
-    page.wait_for_selector("body.ready")
-    return b, page, errors
+    b, page = open_app(chromium, server.url, extra_args=extra_args, timeout_ms=90_000)
+    return b, page, page.errors
 
 
 def wait_page_frame(page, quality="full", after=0):
