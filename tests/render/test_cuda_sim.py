@@ -95,6 +95,10 @@ def _volumes():
     # 16-bit values: more than 256 LUT entries, so uint16 samples in the cache.
     u16 = (u8.astype(np.uint16) * 7 + rng.integers(0, 7, u8.shape)).astype(np.uint16)
     yield Volume.from_array(u16[:12, :12, :12].copy(), name="u16-12^3")
+    # Float values between the shading voxels' 65536 value codes: a shaded sample's value is
+    # read from the codes, and must land on the CPU's LUT entry all the same.
+    f32 = (u16[:12, :12, :12] / 1791.0 + rng.uniform(0, 0.01, (12, 12, 12))).astype(np.float32)
+    yield Volume.from_array(f32, name="f32-12^3")
 
 
 def _tfs(n: int, seed: int):
@@ -115,6 +119,25 @@ def _tfs(n: int, seed: int):
         )
         for _ in range(n)
     ]
+
+
+def _gpu_samples_by_pixel(gpu_cache) -> list[np.ndarray]:
+    """The GPU cache's LUT entries per ray, in the CPU cache's pixel order (row-major)."""
+    from intuitf.render import cuda_kernels as ck
+
+    be = gpu_cache.backend
+    counts = gpu_cache.counts.copy_to_host()
+    base = gpu_cache.tile_base.copy_to_host()
+    samples = gpu_cache.samples.copy_to_host()
+    width, height = gpu_cache.renderer.width, gpu_cache.renderer.height
+    rays: list[np.ndarray] = [np.empty(0, samples.dtype)] * (width * height)
+    for slot in range(be.n_slots):
+        tile, lane = divmod(slot, ck.WARP)
+        ty, tx = divmod(tile, be.tiles_x)
+        i, j = ty * ck.TILE_H + lane // ck.TILE_W, tx * ck.TILE_W + lane % ck.TILE_W
+        if i < height and j < width:
+            rays[i * width + j] = samples[base[tile] + lane + ck.WARP * np.arange(counts[slot])]
+    return rays
 
 
 def _bytes_read_reference(cpu_cache, renderer, tfs) -> np.ndarray:
@@ -238,6 +261,15 @@ def _compare(
         f"{tag}: samples {gc.n_samples} (GPU) vs {cc.n_samples} (CPU)",
     )
     check(gc.samples.dtype == cc.samples.dtype, f"{tag}: sample dtype")
+    if strict:  # the build follows the CPU's float64 arithmetic: the same LUT entries
+        rays = _gpu_samples_by_pixel(gc)
+        cpu_rays = np.split(cc.samples, cc.offsets[1:-1])
+        same = [
+            len(a) == len(b) and np.array_equal(a, b) for a, b in zip(rays, cpu_rays, strict=True)
+        ]
+        check(
+            all(same), f"{tag}: LUT entries of the cache's samples, {same.count(False)} rays differ"
+        )
     many = gc.render_many(tfs)
     check(len(many) == 3, f"{tag}: render_many returns one picture per TF")
     for k, (img, tf) in enumerate(zip(many, tfs, strict=True)):

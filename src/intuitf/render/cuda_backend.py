@@ -11,10 +11,12 @@ arithmetic (in float32), so pictures agree with the CPU's within float rounding.
 
 What lives where
 ----------------
-- The volume (float32) and, for shading, its int16 central-difference gradient are copied to
-  the GPU once per :class:`~intuitf.volume.Volume` and shared by every renderer of it (a
-  renderer per picture size, as the Session keeps). The gradient is computed by the CPU
-  kernel, so it is bit-identical to the CPU path's.
+- The volume (float32) and, for shading, its shading voxels (int16 central-difference
+  gradient and value code) are copied to the GPU once per :class:`~intuitf.volume.Volume`
+  and shared by every renderer of it (a renderer per picture size, as the Session keeps).
+  They are computed by the CPU kernels, so they are bit-identical to the CPU path's, and a
+  shaded sample reads its value from the codes on both (a 16-bit volume's values otherwise
+  land a few per million on the neighbouring LUT entry).
 - A population's LUTs (K, L, 4), their occupancy prefix sums (K, L + 1) and, for direct
   marching, their visible-block masks go up together, and the population renders in one
   launch: one thread per (ray, candidate), the K candidates of a block of rays side by side so
@@ -28,7 +30,8 @@ Both are here, used as on the CPU, because they win in different places:
 
 - **A population (render_many, the optimiser's generations) uses a GPU sample cache.**
   Marching the volume per candidate costs 8 scattered float32 loads and 8 float multiply-adds
-  per sample for the value, plus 24 int16 loads for the gradient when shaded, with no
+  per sample for the value (int16 codes when shaded), plus 24 int16 loads for the gradient
+  when shaded, with no
   texture hardware behind ``numba.cuda``; the cache turns this into 1 byte (unshaded) or 3
   bytes (shaded) per sample, read as one coalesced 32-byte transaction per warp thanks to the
   lane-interleaved tile layout, and one LUT lookup. Per candidate it is ~10–30× less memory
@@ -69,24 +72,28 @@ MAX_LAUNCH_OUTPUT = 1 << 30
 
 
 class DeviceVolume:
-    """A volume's data, and its gradient once asked for, in GPU memory (one per
+    """A volume's data, and its shading voxels once asked for, in GPU memory (one per
     :class:`~intuitf.render.context.RenderContext`, so every renderer of the volume shares it)."""
 
     def __init__(self, context: RenderContext) -> None:
         self.context = context
         self.data = cuda.to_device(context.data)
-        self.grad = None
+        self.lit = None
 
-    def gradient(self) -> Any:
-        if self.grad is None:
+    def shading_voxels(self) -> Any:
+        """Int16 (z, y, x, 4) gradient and value code of each voxel, as the CPU's
+        (:meth:`RenderContext.shading_voxels`): shaded samples read their value from the codes
+        on both, so both round it to the same LUT entry."""
+        if self.lit is None:
             ctx = self.context
-            if ctx.has_gradient:  # a view of the shading voxels: copied to one block
-                g = np.ascontiguousarray(ctx.gradient())
+            if ctx.has_gradient:
+                lit = ctx.shading_voxels()
             else:  # computed here without keeping the 8-bytes-per-voxel host copy
-                g = np.empty(ctx.shape + (3,), dtype=np.int16)
-                kernels.central_gradient(ctx.data, g)
-            self.grad = cuda.to_device(g)
-        return self.grad
+                lit = np.empty(ctx.shape + (4,), dtype=np.int16)
+                kernels.central_gradient(ctx.data, lit)
+                kernels.value_codes(ctx.data, lit)
+            self.lit = cuda.to_device(lit)
+        return self.lit
 
 
 def _occupancy(alpha: np.ndarray) -> np.ndarray:
@@ -112,13 +119,14 @@ class CudaBackend:
         self.bg = cuda.to_device(renderer.background.astype(np.float32))
         self.dt = np.float32(renderer.sample_distance)
         self.t_stop = np.float32(EARLY_STOP)
-        self._no_grad = cuda.to_device(np.zeros((1, 1, 1, 3), dtype=np.int16))
+        self._no_lit = cuda.to_device(np.zeros((1, 1, 1, 4), dtype=np.int16))
         self._no_rgba = cuda.device_array((1, 1, 4), dtype=np.float32)
         self._no_rgb = cuda.device_array((1, 1, 3), dtype=np.uint8)
 
     # -- pieces ---------------------------------------------------------------------------
-    def grad(self) -> Any:
-        return self.volume.gradient() if self.renderer.shading else self._no_grad
+    def lit(self) -> Any:
+        """The shading voxels when shading, else a stand-in the kernels never read."""
+        return self.volume.shading_voxels() if self.renderer.shading else self._no_lit
 
     def cam(self, frame: ViewFrame) -> Any:
         return cuda.to_device(frame.packed().astype(np.float32))
@@ -152,7 +160,7 @@ class CudaBackend:
         r = self.renderer
         lo, hi = r._block_ranges()
         cam = self.cam(frame)
-        grad = self.grad()
+        lit = self.lit()
         parts = []
         for part in self._chunks(luts.shape[0], to8):
             lut = np.ascontiguousarray(luts[part])
@@ -161,7 +169,7 @@ class CudaBackend:
             k = lut.shape[0]
             out_rgba, out_rgb = self._outputs(k, to8)
             ck.march[k * self.n_blocks, ck.BLOCK](
-                self.volume.data, grad, r.shading, cuda.to_device(vis), BLOCK_SIZE,
+                self.volume.data, lit, r.shading, cuda.to_device(vis), BLOCK_SIZE,
                 cuda.to_device(lut), bool(nearest), cam, self.isp, self.dt, self.shade,
                 self.t_stop, self.tiles_x, self.bg, to8, out_rgba, out_rgb,
             )  # fmt: skip
@@ -229,7 +237,7 @@ class CudaSampleCache(CacheViews):
             diffuse = specular = cuda.device_array(1, dtype=np.uint8)
         d_base = cuda.to_device(tile_base)
         ck.fill_samples[blocks, ck.BLOCK](
-            be.volume.data, be.grad(), renderer.shading, cam, isp, dt, nl,
+            be.volume.data, be.lit(), renderer.shading, cam, isp, dt, nl,
             np.float64(renderer.shade_params[3]), be.tiles_x, counts, t0s, d_base, samples,
             diffuse, specular, segmin, segmax,
         )  # fmt: skip

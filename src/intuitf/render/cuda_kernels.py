@@ -2,8 +2,8 @@
 
 They mirror :mod:`intuitf.render.kernels` line by line: the same rays (``cam`` layout, pixel
 centres), the same box (voxel centres), the same sample positions ``t0 + k * dt``, the same
-trilinear value and LUT classification, the same Blinn–Phong terms from the trilinear int16
-gradient, the same front-to-back compositing, early ray termination below ``t_stop`` and
+trilinear value (from the shading voxels' value codes when shaded) and LUT classification,
+the same Blinn–Phong terms from the trilinear int16 gradient, the same front-to-back compositing, early ray termination below ``t_stop`` and
 empty-space skipping (which changes no pixel). Two things differ, both far below 1/255:
 arithmetic is float32 (the CPU kernels mix in float64; consumer GPUs run float64 at 1/64 of
 the float32 rate, so every constant here is a float32 and nothing promotes) except in the
@@ -40,7 +40,13 @@ import math
 import numpy as np
 
 from intuitf.render.cuda_compat import prepare_numba_cuda
-from intuitf.render.kernels import FLAT_GRADIENT, GRAD_SCALE, SEG_SHIFT
+from intuitf.render.kernels import (
+    FLAT_GRADIENT,
+    GRAD_SCALE,
+    SEG_SHIFT,
+    VALUE_CODE_OFFSET,
+    VALUE_CODE_SCALE,
+)
 
 prepare_numba_cuda()  # before numba.cuda is first imported (NumPy 2.5 with numba-cuda)
 from numba import cuda as cuda  # noqa: E402  (re-exported: cuda_backend.cuda)
@@ -57,6 +63,12 @@ SKIP_EPS = f32(1e-4)
 FLAT = f32(FLAT_GRADIENT * GRAD_SCALE)
 U8 = f32(255.0)
 INV255 = f32(1.0 / 255.0)
+#: A shading voxel's value code to its value (``kernels.value_codes``): float32 for the
+#: marcher, float64 (Python floats) for the sample cache's build.
+VALUE_SCALE = f32(VALUE_CODE_SCALE)
+VALUE_OFFSET = f32(VALUE_CODE_OFFSET)
+VALUE_SCALE64 = float(VALUE_CODE_SCALE)
+VALUE_OFFSET64 = float(VALUE_CODE_OFFSET)
 
 #: Rays per tile (one warp) and the tile's shape in pixels.
 WARP = 32
@@ -149,10 +161,7 @@ def _cell(p, n):
 
 
 @cuda.jit(device=True)
-def _trilinear(data, px, py, pz, nx, ny, nz):
-    i, fx = _cell(px, nx)
-    j, fy = _cell(py, ny)
-    k, fz = _cell(pz, nz)
+def _trilinear_at(data, i, j, k, fx, fy, fz):
     gx = ONE - fx
     c00 = data[k, j, i] * gx + data[k, j, i + 1] * fx
     c01 = data[k, j + 1, i] * gx + data[k, j + 1, i + 1] * fx
@@ -164,24 +173,47 @@ def _trilinear(data, px, py, pz, nx, ny, nz):
 
 
 @cuda.jit(device=True)
-def _tri_component(grad, i, j, k, fx, fy, fz, c):
-    gx = ONE - fx
-    c00 = f32(grad[k, j, i, c]) * gx + f32(grad[k, j, i + 1, c]) * fx
-    c01 = f32(grad[k, j + 1, i, c]) * gx + f32(grad[k, j + 1, i + 1, c]) * fx
-    c10 = f32(grad[k + 1, j, i, c]) * gx + f32(grad[k + 1, j, i + 1, c]) * fx
-    c11 = f32(grad[k + 1, j + 1, i, c]) * gx + f32(grad[k + 1, j + 1, i + 1, c]) * fx
-    return (c00 * (ONE - fy) + c01 * fy) * (ONE - fz) + (c10 * (ONE - fy) + c11 * fy) * fz
+def _code_at(lit, i, j, k, fx, fy, fz, vscale, voff):
+    """The value, trilinear in cell (i, j, k) of the shading voxels' value codes: the value a
+    shaded CPU sample reads (``kernels._lit_at``, same corner weights in the same order), so
+    a 16-bit or float volume's samples land on the same LUT entries as on the CPU."""
+    ex = ONE - fx
+    ey = ONE - fy
+    ez = ONE - fz
+    a = ZERO * fx
+    for dk in range(2):
+        wk = fz if dk else ez
+        for dj in range(2):
+            wjk = wk * (fy if dj else ey)
+            for di in range(2):
+                a += wjk * (fx if di else ex) * f32(lit[k + dk, j + dj, i + di, 3])
+    return a * vscale + voff
 
 
 @cuda.jit(device=True)
-def _shade_terms(grad, px, py, pz, nx, ny, nz, isp, lx, ly, lz, hx, hy, hz, shin):
-    """(|n.l|, |n.h|**shininess) at a point from the trilinear precomputed gradient."""
-    i, fx = _cell(px, nx)
-    j, fy = _cell(py, ny)
-    k, fz = _cell(pz, nz)
-    gx = _tri_component(grad, i, j, k, fx, fy, fz, 0) * isp[0]
-    gy = _tri_component(grad, i, j, k, fx, fy, fz, 1) * isp[1]
-    gz = _tri_component(grad, i, j, k, fx, fy, fz, 2) * isp[2]
+def _gradient_at(lit, i, j, k, fx, fy, fz):
+    """The index-space gradient, trilinear in cell (i, j, k) of the shading voxels."""
+    ex = ONE - fx
+    ey = ONE - fy
+    ez = ONE - fz
+    a0 = ZERO * fx
+    a1 = ZERO * fx
+    a2 = ZERO * fx
+    for dk in range(2):
+        wk = fz if dk else ez
+        for dj in range(2):
+            wjk = wk * (fy if dj else ey)
+            for di in range(2):
+                w = wjk * (fx if di else ex)
+                a0 += w * f32(lit[k + dk, j + dj, i + di, 0])
+                a1 += w * f32(lit[k + dk, j + dj, i + di, 1])
+                a2 += w * f32(lit[k + dk, j + dj, i + di, 2])
+    return a0, a1, a2
+
+
+@cuda.jit(device=True)
+def _shade_terms(gx, gy, gz, lx, ly, lz, hx, hy, hz, shin):
+    """(|n.l|, |n.h|**shininess) for the world gradient (gx, gy, gz) (up to a scale)."""
     m = math.sqrt(gx * gx + gy * gy + gz * gz)
     if m < FLAT:
         return ONE, ZERO
@@ -220,7 +252,7 @@ def _store(out_rgba, out_rgb, to8, bg, c, p, r, g, b, tr):
 # ---------------------------------------------------------------------------------------------
 @cuda.jit(fastmath=True, cache=True)
 def march(
-    data, grad, shading, vis, bsize, luts, nearest, cam, isp, dt, shade, t_stop, tiles_x, bg,
+    data, lit, shading, vis, bsize, luts, nearest, cam, isp, dt, shade, t_stop, tiles_x, bg,
     to8, out_rgba, out_rgb,
 ):  # fmt: skip
     """:func:`kernels.march` for candidate c (LUT ``luts[c]``, visible blocks ``vis[c]``).
@@ -277,7 +309,13 @@ def march(
                 kn = int(math.ceil((tex - t0) / dt - SKIP_EPS))
                 k = kn if kn > k else k + 1
                 continue
-            v = _trilinear(data, px, py, pz, nx, ny, nz)
+            ci, fx = _cell(px, nx)
+            cj, fy = _cell(py, ny)
+            ck, fz = _cell(pz, nz)
+            if shading:
+                v = _code_at(lit, ci, cj, ck, fx, fy, fz, VALUE_SCALE, VALUE_OFFSET)
+            else:
+                v = _trilinear_at(data, ci, cj, ck, fx, fy, fz)
             x = v * scale
             if nearest:
                 x = f32(int(x + HALF))
@@ -293,13 +331,14 @@ def march(
                 cg = luts[c, q, 1] * (ONE - f) + luts[c, q + 1, 1] * f
                 cb = luts[c, q, 2] * (ONE - f) + luts[c, q + 1, 2] * f
                 if shading:
+                    gx, gy, gz = _gradient_at(lit, ci, cj, ck, fx, fy, fz)
                     ndl, sp = _shade_terms(
-                        grad, px, py, pz, nx, ny, nz, isp, lx, ly, lz, hx, hy, hz, shin
+                        gx * isp[0], gy * isp[1], gz * isp[2], lx, ly, lz, hx, hy, hz, shin
                     )
-                    lit = ka + kd * ndl
-                    cr = min(ONE, cr * lit + ks * sp)
-                    cg = min(ONE, cg * lit + ks * sp)
-                    cb = min(ONE, cb * lit + ks * sp)
+                    light = ka + kd * ndl
+                    cr = min(ONE, cr * light + ks * sp)
+                    cg = min(ONE, cg * light + ks * sp)
+                    cb = min(ONE, cb * light + ks * sp)
                 w = tr * a
                 r += w * cr
                 g += w * cg
@@ -337,7 +376,7 @@ def count_samples(cam, isp, nx, ny, nz, dt, tiles_x, counts, t0s):
 
 @cuda.jit(fastmath=True, cache=True)
 def fill_samples(
-    data, grad, shading, cam, isp, dt, nl, shin, tiles_x, counts, t0s, tile_base, samples,
+    data, lit, shading, cam, isp, dt, nl, shin, tiles_x, counts, t0s, tile_base, samples,
     diffuse, specular, segmin, segmax,
 ):  # fmt: skip
     """:func:`kernels.fill_samples` into the tiled layout, with each segment's (min, max).
@@ -367,12 +406,21 @@ def fill_samples(
         px = oxi + t * dxi
         py = oyi + t * dyi
         pz = ozi + t * dzi
-        v = _trilinear(data, px, py, pz, nx, ny, nz)
+        ci, fx = _cell(px, nx)
+        cj, fy = _cell(py, ny)
+        ck, fz = _cell(pz, nz)
+        if shading:
+            v = _code_at(lit, ci, cj, ck, fx, fy, fz, VALUE_SCALE64, VALUE_OFFSET64)
+        else:
+            v = _trilinear_at(data, ci, cj, ck, fx, fy, fz)
         q = int(v * scale + HALF)
         at = base + k * WARP
         samples[at] = q
         if shading:
-            ndl, sp = _shade_terms(grad, px, py, pz, nx, ny, nz, isp, lx, ly, lz, hx, hy, hz, shin)
+            gx, gy, gz = _gradient_at(lit, ci, cj, ck, fx, fy, fz)
+            ndl, sp = _shade_terms(
+                gx * isp[0], gy * isp[1], gz * isp[2], lx, ly, lz, hx, hy, hz, shin
+            )
             diffuse[at] = int(ndl * U8 + HALF)
             specular[at] = int(sp * U8 + HALF)
         r = k % SEG
