@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -169,3 +170,68 @@ def test_a_model_judge_is_shown_the_selection(monkeypatch):
     k = next(i for i, p in enumerate(content) if p.get("text") == SELECTION_LABEL)
     assert content[k + 1]["type"] == "image_url"
     assert content[k + 1]["image_url"]["url"].startswith("data:image/png;base64,")
+
+
+def _pot_over_soil():
+    """A dark brown pot (selected) in front of bright silver soil, over a black background."""
+    mask = disk(0.25)
+    base = np.zeros((S, S, 3), np.uint8)
+    base[mask] = (90, 50, 30)
+    behind = np.zeros((S, S, 3), np.uint8)
+    behind[mask] = (200, 200, 205)  # the soil the pot covers
+    see_through = base.copy()
+    see_through[mask] = (150, 128, 118)  # half-way: the soil shows through the pot
+    darker = base.copy()
+    darker[mask] = (55, 30, 18)  # nearer the background, but the pot only grew denser
+    return base, behind, mask, see_through, darker
+
+
+def test_transparent_fades_toward_what_the_selection_covers_not_the_background():
+    # Fading a pot shows the soil in it, which stands out more from the black background than
+    # the pot did: judged against the background, a darker, denser pot looked "more
+    # transparent" and the refine kept the pot as it was.
+    base, behind, mask, see_through, darker = _pot_over_soil()
+    edit = aspects_for("edit")
+    j = MetricJudge()
+    fade = Intent(kind="edit", text="transparent", base=base, selected=(3,),
+                  selection_mask=mask, behind=behind)  # fmt: skip
+    v = asyncio.run(j.compare(darker, see_through, edit, fade))
+    assert v.per_aspect["edit_instruction_alignment"] is Choice.SECOND
+    assert v.overall is Choice.SECOND
+    # "more opaque" goes the other way: away from what the selection covers.
+    solid = replace(fade, text="more opaque")
+    v = asyncio.run(j.compare(darker, see_through, edit, solid))
+    assert v.per_aspect["edit_instruction_alignment"] is Choice.FIRST
+    # Without the picture behind, the background stands in (what lies behind is unknown).
+    assert fade.fingerprint() == replace(fade, behind=None).fingerprint()
+
+
+def test_the_session_renders_what_the_selected_features_cover():
+    from intuitf.intent.selection import edit_intent, hide_selected
+    from intuitf.render import Camera, VolumeRenderer
+    from intuitf.session import RunSettings
+    from intuitf.tf import Gaussian, GaussianTF
+    from intuitf.volume import Volume
+
+    z, y, x = np.mgrid[0:32, 0:32, 0:32] / 31.0 - 0.5
+    r = np.sqrt(x**2 + y**2 + z**2)
+    data = np.where(r < 0.2, 0.8, np.where(r < 0.35, 0.4, 0.02)).astype(np.float32)
+    vol = Volume.from_array(data, value_range=(0.0, 1.0))
+    tf = GaussianTF((Gaussian(0.4, 0.03, 0.3, (0.45, 0.25, 0.1)),
+                     Gaussian(0.8, 0.03, 0.9, (0.9, 0.9, 0.95))))  # fmt: skip
+    settings = RunSettings(image_size=48, output_size=48, shading=False)
+    got = edit_intent(Intent(kind="edit", text="transparent", selected=(0,)), vol, tf, settings)
+    cache = VolumeRenderer(vol, size=48, shading=False).sample_cache(Camera())
+    assert np.array_equal(got.base, cache.render(tf))
+    assert np.array_equal(got.behind, cache.render(hide_selected(tf, (0,))))
+    assert hide_selected(tf, (0,)).gaussians[0].height == 0.0
+    # Behind the shell lies the bright core: there the picture without it is brighter.
+    core = got.selection_mask & (got.behind.mean(axis=2) > got.base.mean(axis=2) + 20)
+    assert core.sum() > 20
+    # A resumed run reads its base back: the same picture, so the same picture behind it; a
+    # base from another view gets none (what lies behind it there is not known).
+    again = edit_intent(replace(got, selection_mask=None, behind=None), vol, tf, settings)
+    assert np.array_equal(again.behind, got.behind)
+    other = np.zeros_like(got.base)
+    given = Intent(kind="edit", text="transparent", selected=(0,), base=other)
+    assert edit_intent(given, vol, tf, settings).behind is None

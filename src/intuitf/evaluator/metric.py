@@ -532,7 +532,8 @@ class MetricJudge:
         A named colour: how close the region's pixels come to it (lightness, which shading
         varies, counts a third), 1 for all of them on it. An opacity word ("more
         transparent", "fainter", "opaque", "hide"): how much the region moved toward or away
-        from the background compared with the base. Both: their mean. Neither: how much the
+        from what the selection covers (``intent.behind``; the background without it)
+        compared with the base. Both: their mean. Neither: how much the
         region changed at all (a region is needed; "change something somewhere" is not
         checkable).
         """
@@ -552,8 +553,17 @@ class MetricJudge:
                 parts.append(_colour_closeness(f.lab[region], names[0]))
         direction = _opacity_direction(text)
         if direction and base is not None:
-            now = float(np.linalg.norm(f.lab[region] - f.bg_lab, axis=1).mean())
-            before = float(np.linalg.norm(base[region] - f.bg_lab, axis=1).mean())
+            # Fading moves the region toward what the selection covers: the picture without
+            # it where the Session made one, else the background.
+            behind = (
+                f.bg_lab
+                if intent.behind is None
+                else _resize_like(self.features(intent.behind).lab, f.lab.shape[:2], order=1)[
+                    region
+                ]
+            )
+            now = float(np.linalg.norm(f.lab[region] - behind, axis=-1).mean())
+            before = float(np.linalg.norm(base[region] - behind, axis=-1).mean())
             if direction < 0:
                 parts.append(_fading(before, now, hide=bool(_HIDE_RE.search(text.lower()))))
             else:

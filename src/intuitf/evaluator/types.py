@@ -74,7 +74,9 @@ class Intent:
     - ``edit``: ``instruction`` applies to the features ``selected`` (Gaussian indices) of
       ``base``, the rendering before the edit; everything else should be preserved.
       ``selection_mask`` (bool, the base's height x width) marks the pixels those features
-      cover in ``base``, so a judge can see where the change should happen.
+      cover in ``base``, so a judge can see where the change should happen, and ``behind``
+      is ``base`` with those features hidden: what they cover, where a more transparent
+      selection should go (over the background only where nothing lies behind it).
     ``about`` says what the volume is ("a CT of a human foot"), for any kind.
     """
 
@@ -87,11 +89,13 @@ class Intent:
     about: str | None = None
     selection_mask: np.ndarray | None = None
     part_regions: tuple[PartRegion, ...] = ()
+    behind: np.ndarray | None = None
 
     def fingerprint(self) -> str:
         """A stable hash of the intent's content (for verdict caching).
 
-        ``part_regions`` are left out: they are worked out from the volume for the offline
+        ``part_regions`` and ``behind`` are left out: they are worked out from the volume
+        (``behind`` from ``base`` and ``selected``, which are in) for the offline
         judge and are not part of what a model is asked.
         """
         import hashlib

@@ -78,18 +78,22 @@ def _fit_mask(mask: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
 
 
 def edit_intent(intent, volume, tf, settings):
-    """``intent`` (an edit of ``tf``'s selected Gaussians) with its base picture and mask.
+    """``intent`` (an edit of ``tf``'s selected Gaussians) with its base picture, mask and
+    the picture behind the selection.
 
     For the Session: the rendering before the edit (when the intent has none), made as the
-    candidates are (the same sample cache, so an unchanged TF gives the same pixels), and the
-    pixels the selected Gaussians cover in it (:func:`selection_mask`). ``settings`` gives
-    the camera, picture size, shading and background (a ``RunSettings``).
+    candidates are (the same sample cache, so an unchanged TF gives the same pixels), the
+    pixels the selected Gaussians cover in it (:func:`selection_mask`) and ``tf`` rendered
+    with them hidden (``Intent.behind``: where "transparent" goes; a pot made transparent
+    shows the soil in it, which can stand out more from the background than the pot did).
+    ``settings`` gives the camera, picture size, shading and background (a ``RunSettings``).
     """
     from dataclasses import replace
 
     from intuitf.render import Camera, VolumeRenderer
 
-    if intent.base is not None and intent.selection_mask is not None:
+    wants_behind = intent.behind is None and bool(intent.selected)
+    if intent.base is not None and intent.selection_mask is not None and not wants_behind:
         return intent
     camera = Camera.from_dict(settings.camera) if settings.camera else Camera()
     cache = VolumeRenderer(
@@ -98,8 +102,24 @@ def edit_intent(intent, volume, tf, settings):
         shading=settings.shading,
         background=tuple(settings.background),
     ).sample_cache(camera)
-    base = intent.base if intent.base is not None else cache.render(tf)
+    made = cache.render(tf)
+    base = intent.base if intent.base is not None else made
     mask = intent.selection_mask
     if mask is None and intent.selected:
         mask = selection_mask(cache.attribution(tf), intent.selected)
-    return replace(intent, base=base, selection_mask=mask)
+    behind = intent.behind
+    # Only behind this view's own picture (a resumed run's base, read back, is that picture;
+    # one given from another view is not).
+    if wants_behind and np.shape(base) == made.shape and np.array_equal(base, made):
+        behind = cache.render(hide_selected(tf, intent.selected))
+    return replace(intent, base=base, selection_mask=mask, behind=behind)
+
+
+def hide_selected(tf, selected: Sequence[int]):
+    """``tf`` with the Gaussians ``selected`` at height 0 (indices outside it are ignored)."""
+    from dataclasses import replace
+
+    chosen = {int(i) for i in selected}
+    return tf.with_gaussians(
+        replace(g, height=0.0) if k in chosen else g for k, g in enumerate(tf.gaussians)
+    )
