@@ -2,18 +2,18 @@
 
 They mirror :mod:`intuitf.render.kernels` line by line: the same rays (``cam`` layout, pixel
 centres), the same box (voxel centres), the same sample positions ``t0 + k * dt``, the same
-trilinear value (from the shading voxels' value codes when shaded) and LUT classification,
-the same Blinn–Phong terms from the trilinear int16 gradient, the same front-to-back
-compositing, early ray termination below ``t_stop`` and empty-space skipping (which changes
-no pixel). Two things differ, both far below 1/255: arithmetic is float32 (the CPU kernels
-mix in float64; consumer GPUs run float64 at 1/64 of the float32 rate, so every constant
-here is a float32 and nothing promotes) except in the sample cache's build (``count_samples``, ``fill_samples``), once per camera, which takes a
-float64 camera, step and inverse spacing, so its positions and trilinear values follow the
-CPU's float64 and each value is rounded to the same LUT entry (in float32 a few values per
-thousand landed on the neighbouring entry: on an H200, single pixels up to 14 levels apart
-where a narrow Gaussian makes the LUT steep); and where the
-CPU writes ``RGBA`` and converts to 8 bits in a second pass, the GPU kernels can write the
-8-bit picture directly (a population's float images would cost 16 bytes per pixel over PCIe).
+trilinear value (from the shading voxels' value codes when shaded) and LUT classification, the
+same Blinn–Phong terms from the trilinear int16 gradient, the same front-to-back compositing,
+early ray termination below ``t_stop`` and empty-space skipping (which changes no pixel). Two
+things differ, both far below 1/255: arithmetic is float32 (the CPU kernels mix in float64;
+consumer GPUs run float64 at 1/64 of the float32 rate, so every constant here is a float32 and
+nothing promotes) except in the sample cache's build (``count_samples``, ``fill_samples``),
+once per camera, which takes a float64 camera, step and inverse spacing, so its positions and
+trilinear values follow the CPU's float64 and each value is rounded to the same LUT entry (in
+float32 a few values per thousand landed on the neighbouring entry: on an H200, single pixels
+up to 14 levels apart where a narrow Gaussian makes the LUT steep); and where the CPU writes
+``RGBA`` and converts to 8 bits in a second pass, the GPU kernels can write the 8-bit picture
+directly (a population's float images would cost 16 bytes per pixel over PCIe).
 
 Threads and memory layout
 -------------------------
