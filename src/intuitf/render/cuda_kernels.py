@@ -191,6 +191,20 @@ def _code_at(lit, i, j, k, fx, fy, fz, vscale, voff):
 
 
 @cuda.jit(device=True)
+def _sample(data, lit, shading, px, py, pz, nx, ny, nz, vscale, voff):
+    """The cell of index-space point p, its weights and the value there: from the shading
+    voxels' codes when shading (as ``kernels._sample``), else from ``data``."""
+    i, fx = _cell(px, nx)
+    j, fy = _cell(py, ny)
+    k, fz = _cell(pz, nz)
+    if shading:
+        v = _code_at(lit, i, j, k, fx, fy, fz, vscale, voff)
+    else:
+        v = _trilinear_at(data, i, j, k, fx, fy, fz)
+    return i, j, k, fx, fy, fz, v
+
+
+@cuda.jit(device=True)
 def _gradient_at(lit, i, j, k, fx, fy, fz):
     """The index-space gradient, trilinear in cell (i, j, k) of the shading voxels."""
     ex = ONE - fx
@@ -309,13 +323,9 @@ def march(
                 kn = int(math.ceil((tex - t0) / dt - SKIP_EPS))
                 k = kn if kn > k else k + 1
                 continue
-            ci, fx = _cell(px, nx)
-            cj, fy = _cell(py, ny)
-            ck, fz = _cell(pz, nz)
-            if shading:
-                v = _code_at(lit, ci, cj, ck, fx, fy, fz, VALUE_SCALE, VALUE_OFFSET)
-            else:
-                v = _trilinear_at(data, ci, cj, ck, fx, fy, fz)
+            ci, cj, ck, fx, fy, fz, v = _sample(
+                data, lit, shading, px, py, pz, nx, ny, nz, VALUE_SCALE, VALUE_OFFSET
+            )
             x = v * scale
             if nearest:
                 x = f32(int(x + HALF))
@@ -406,13 +416,9 @@ def fill_samples(
         px = oxi + t * dxi
         py = oyi + t * dyi
         pz = ozi + t * dzi
-        ci, fx = _cell(px, nx)
-        cj, fy = _cell(py, ny)
-        ck, fz = _cell(pz, nz)
-        if shading:
-            v = _code_at(lit, ci, cj, ck, fx, fy, fz, VALUE_SCALE64, VALUE_OFFSET64)
-        else:
-            v = _trilinear_at(data, ci, cj, ck, fx, fy, fz)
+        ci, cj, ck, fx, fy, fz, v = _sample(
+            data, lit, shading, px, py, pz, nx, ny, nz, VALUE_SCALE64, VALUE_OFFSET64
+        )
         q = int(v * scale + HALF)
         at = base + k * WARP
         samples[at] = q
