@@ -207,7 +207,7 @@ def test_transparent_fades_toward_what_the_selection_covers_not_the_background()
 
 
 def test_the_session_renders_what_the_selected_features_cover():
-    from intuitf.intent.selection import edit_intent, hide_selected
+    from intuitf.intent.selection import edit_intent
     from intuitf.render import Camera, VolumeRenderer
     from intuitf.session import RunSettings
     from intuitf.tf import Gaussian, GaussianTF
@@ -223,8 +223,8 @@ def test_the_session_renders_what_the_selected_features_cover():
     got = edit_intent(Intent(kind="edit", text="transparent", selected=(0,)), vol, tf, settings)
     cache = VolumeRenderer(vol, size=48, shading=False).sample_cache(Camera())
     assert np.array_equal(got.base, cache.render(tf))
-    assert np.array_equal(got.behind, cache.render(hide_selected(tf, (0,))))
-    assert hide_selected(tf, (0,)).gaussians[0].height == 0.0
+    assert np.array_equal(got.behind, cache.render(tf.hide((0,))))
+    assert tf.hide((0,)).gaussians[0].height == 0.0
     # Behind the shell lies the bright core: there the picture without it is brighter.
     core = got.selection_mask & (got.behind.mean(axis=2) > got.base.mean(axis=2) + 20)
     assert core.sum() > 20

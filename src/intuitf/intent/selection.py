@@ -111,15 +111,5 @@ def edit_intent(intent, volume, tf, settings):
     # Only behind this view's own picture (a resumed run's base, read back, is that picture;
     # one given from another view is not).
     if wants_behind and np.shape(base) == made.shape and np.array_equal(base, made):
-        behind = cache.render(hide_selected(tf, intent.selected))
+        behind = cache.render(tf.hide(intent.selected))
     return replace(intent, base=base, selection_mask=mask, behind=behind)
-
-
-def hide_selected(tf, selected: Sequence[int]):
-    """``tf`` with the Gaussians ``selected`` at height 0 (indices outside it are ignored)."""
-    from dataclasses import replace
-
-    chosen = {int(i) for i in selected}
-    return tf.with_gaussians(
-        replace(g, height=0.0) if k in chosen else g for k, g in enumerate(tf.gaussians)
-    )

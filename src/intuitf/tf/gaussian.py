@@ -210,6 +210,14 @@ class GaussianTF:
     def unfreeze(self) -> GaussianTF:
         return self.with_gaussians(replace(g, frozen=False) for g in self.gaussians)
 
+    def hide(self, indices: Sequence[int]) -> GaussianTF:
+        """The same TF with the Gaussians at ``indices`` at height 0 (the rest keep their
+        indices; indices outside the TF are ignored)."""
+        chosen = set(int(i) for i in indices)
+        return self.with_gaussians(
+            replace(g, height=0.0) if i in chosen else g for i, g in enumerate(self.gaussians)
+        )
+
     def only(self, index: int) -> GaussianTF:
         """A TF with the single Gaussian ``index`` (for feature views)."""
         return self.with_gaussians([self.gaussians[index]])
