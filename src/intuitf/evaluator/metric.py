@@ -26,7 +26,9 @@ aspect key                     measure (higher is better unless noted)
                                named colours ("red", "ivory",
                                "bone white", ...) must cover part of the foreground (share of
                                foreground pixels near each, a pixel counting fully within ΔE
-                               6 and not at all beyond ΔE 25, saturating at 5 %);
+                               6 and not at all beyond ΔE 25, saturating at 5 %; an
+                               achromatic one, "opaque ivory", also on shaded surfaces:
+                               near it once brightened, as light as it on the lit side);
                                "opaque" / "semi-opaque" / "transparent" / "faint" against the
                                mean colour distance of the foreground from the background;
                                each solid structure the words name, in its own region of
@@ -617,8 +619,9 @@ def _clause_presence(f: _Features, name: str, mod: str | None) -> float:
     target = _named_lab([name])[0]
     near = _nearness(pix, target)
     if np.hypot(target[1], target[2]) < 12:
-        # Achromatic colours (white, ivory, grey) have no hue to follow: match them directly.
-        return _saturating(near.mean(), _CLAUSE_SATURATION)
+        # Achromatic colours (white, ivory, grey) have no hue to follow: match them directly,
+        # or as a shaded surface of that colour.
+        return max(_saturating(near.mean(), _CLAUSE_SATURATION), _shaded_presence(f, name))
     hue = np.arctan2(pix[:, 2], pix[:, 1])
     chroma = np.hypot(pix[:, 1], pix[:, 2])
     t_hue = np.arctan2(target[2], target[1])
@@ -642,6 +645,37 @@ def _clause_presence(f: _Features, name: str, mod: str | None) -> float:
         toward_bg = np.abs(pix[:, 0] - f.bg_lab[0]) < 0.8 * abs(target[0] - f.bg_lab[0])
         tinted = tinted * (~solid & toward_bg)
     return _saturating(tinted.mean(), _CLAUSE_SATURATION * 1.5)
+
+
+def _shaded_presence(f: _Features, name: str) -> float:
+    """How well the foreground shows achromatic colour ``name`` on shaded surfaces.
+
+    The headlight darkens a surface turned away, and a thin one (ribs, at 128 px) never shows
+    its full lightness: opaque ivory ribs showed L* 54-81, beyond ΔE 25 of ivory everywhere,
+    so "opaque ivory bone" scored nothing on them and a search painted the whole chest red.
+    Each lit pixel (max channel > 0.3) is brightened to the colour's own max channel and
+    compared with it (:func:`_nearness`, as :func:`_region_colour` does per structure); the
+    share is then discounted by how far the brightest of the matching pixels (90th
+    percentile) stay from the colour's lightness, so a grey surface does not pass for white.
+    """
+    if f.rgb is None:
+        return 0.0
+    rgb = f.rgb[f.fg].astype(np.float32) / 255.0
+    asked = np.asarray(NAMED_COLOURS[name], np.float32) / 255.0
+    peak = rgb.max(axis=1)
+    lit = peak > 0.3
+    if int(lit.sum()) < _REGION_MIN_PIXELS:
+        return 0.0
+    shown = rgb2lab((rgb[lit] * (float(asked.max()) / peak[lit, None]))[None])[0]
+    near = _nearness(shown, _named_lab([name])[0])
+    on = near > 0.5
+    if int(on.sum()) < _REGION_MIN_PIXELS:
+        return 0.0
+    bright = float(np.percentile(peak[lit][on], 90))
+    share = float(near.sum()) / rgb.shape[0]
+    return _saturating(share, _CLAUSE_SATURATION) * float(
+        np.exp(-abs(bright - float(asked.max())) / 0.3)
+    )
 
 
 #: Below this many pixels, a named structure does not show in its region.

@@ -17,20 +17,27 @@ image, so that renderings of any size compare alike):
   :func:`box_silhouette`), the background's own values are painted: every nearly
   colourless foreground pixel counts as veil however bright, and so does every faint one
   (within ΔE 40 of the background) whatever its colour, and the clarity is halved.
-- **grain** (noise): the ratio of fine-scale lightness energy (the image minus its
-  σ = 0.8 px blur) to medium-scale energy (σ = 0.8 minus σ = 2.5 px); edges of real
-  structures carry energy at both scales, speckle only at the fine one. Grain above 0.5
-  lowers the clarity exponentially.
+- **grain** (noise): the ratio of speckle's fine-scale lightness energy to the medium-scale
+  energy (σ = 0.8 minus σ = 2.5 px blur). Fine energy is the image minus its σ = 0.8 px blur;
+  speckle is the part of it in specks: connected runs of at most 4 pixels that stand out of
+  that blur (by more than the fine energy's standard deviation, brighter or darker). Edges of
+  real structures carry energy at both scales, speckle only at the fine one; and thin
+  structures (ribs, vessels, branches at 128 px) carry fine energy too, but in lines, not
+  specks: counted whole, a rib cage read as noisier than the speckle of a noise Gaussian
+  (grain 1.32 against 1.07-1.78), and no search showed ribs crisply. Grain above 0.5 lowers
+  the clarity exponentially.
 - **separation**: spread of the clearly shown pixels in the CIELAB a*b* plane (the standard
   deviation of their chroma coordinates): materials told apart by colour. A single opaque
   shell, one colour with shading, has little; washed-out colours have none.
 - **crispness**: the 90th percentile of the lightness gradient (σ = 1 px) in the clearly
   shown pixels, /10: boundaries that are sharp rather than smeared.
 
-``clarity = (1 - max(0, veil - 0.1) / 0.9)² · exp(-2 · max(0, grain - 0.5)) · (0.5 if box)``,
+``clarity = (1 - max(0, veil - 0.1) / 0.9)² · exp(-3 · max(0, grain - 0.5)) · (0.5 if box)``,
 in [0, 1].
 Information richness is ``entropy of the clear pixels' colours · sqrt(their coverage) ·
-clarity · (0.4 + 0.6 · min(1, separation / 25))``; feature discrimination is
+min(1, coverage / 0.02) · clarity · (0.4 + 0.6 · min(1, separation / 25))`` (a speck under
+2 % of the picture, however colourful, is not an informative rendering; the grain kept such
+specks down once, when it counted all fine energy); feature discrimination is
 ``(min(1.5, separation / 20) + 0.3 · min(1, crispness)) · clarity``. A blank picture scores 0
 on both. The constants were set on the labelled pairs in ``tests/data/judge_pairs`` (built by
 ``benchmarks/judge_pairs.py``) and checked on pairs of six volumes that set does not hold
@@ -73,10 +80,14 @@ BOX_PENALTY = 0.5
 VEIL_TOLERATED = 0.1
 #: Grain (fine/medium energy ratio) above which the clarity falls, and how fast.
 GRAIN_FREE = 0.5
-GRAIN_RATE = 2.0
+GRAIN_RATE = 3.0
+#: Largest run of pixels (4-connected) that counts as a speck, not a line, in the grain.
+SPECK_PIXELS = 4
 #: a*b* spread at which colour separation counts fully (richness) / per unit (discrimination).
 SEPARATION_FULL = 25.0
 SEPARATION_UNIT = 20.0
+#: Clear coverage below which the richness falls in proportion (a speck, not a rendering).
+SMALL_COVERAGE = 0.02
 
 
 @dataclass(frozen=True)
@@ -158,6 +169,24 @@ def _entropy(counts: np.ndarray) -> float:
     return float(-(p * np.log2(p)).sum())
 
 
+def _grain(light: np.ndarray, fg: np.ndarray) -> float:
+    """Speckle's fine-scale energy over the medium-scale energy of the foreground (the
+    module docstring's **grain**)."""
+    fine_blur = ndimage.gaussian_filter(light, 0.8)
+    medium_blur = ndimage.gaussian_filter(light, 2.5)
+    fine = light - fine_blur
+    medium = float(np.abs(fine_blur - medium_blur)[fg].mean())
+    step = float(np.abs(fine)[fg].std())
+    specks = np.zeros(fg.shape, bool)
+    for stands_out in (fine > step, fine < -step):
+        runs, n = ndimage.label(stands_out & fg)
+        if n:
+            small = np.bincount(runs.ravel()) <= SPECK_PIXELS
+            small[0] = False
+            specks |= small[runs]
+    return float(np.abs(fine)[specks].sum() / fg.sum()) / max(medium, 1e-6)
+
+
 def quality(rgb: np.ndarray) -> Quality:
     """The quality measures of a uint8 RGB picture (H, W, 3)."""
     img = np.asarray(rgb, dtype=np.float32) / 255.0
@@ -184,11 +213,7 @@ def quality(rgb: np.ndarray) -> Quality:
     # A veil is an area: thin grey lines (fine vessels, edges seen at 128 px) are structure.
     veil_px = ndimage.binary_opening(veil_px, structure=np.ones((3, 3), bool))
     veil = float(veil_px.sum()) / n
-    fine_blur = ndimage.gaussian_filter(light, 0.8)
-    medium_blur = ndimage.gaussian_filter(light, 2.5)
-    fine = float(np.abs(light - fine_blur)[fg].mean())
-    medium = float(np.abs(fine_blur - medium_blur)[fg].mean())
-    grain = fine / max(medium, 1e-6)
+    grain = _grain(light, fg)
     clear = fg & ~veil_px
     clarity = (1.0 - max(0.0, veil - VEIL_TOLERATED) / (1.0 - VEIL_TOLERATED)) ** 2
     clarity *= float(np.exp(-GRAIN_RATE * max(0.0, grain - GRAIN_FREE)))
@@ -205,8 +230,9 @@ def quality(rgb: np.ndarray) -> Quality:
     crispness = float(np.percentile(np.hypot(gx, gy)[clear], 90)) / 10.0
     coverage = float(clear.mean())
     richness = (
-        entropy * np.sqrt(coverage) * clarity * (0.4 + 0.6 * min(1.0, separation / SEPARATION_FULL))
-    )
+        entropy * np.sqrt(coverage) * min(1.0, coverage / SMALL_COVERAGE) * clarity
+        * (0.4 + 0.6 * min(1.0, separation / SEPARATION_FULL))
+    )  # fmt: skip
     discrimination = (min(1.5, separation / SEPARATION_UNIT) + 0.3 * min(1.0, crispness)) * clarity
     return Quality(
         coverage, box, veil, grain, separation, crispness, entropy, clarity,
