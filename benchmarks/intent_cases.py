@@ -18,14 +18,16 @@ structure:
 - **opacity**: the TF's mean opacity (Gaussian height units, per unit length) over the
   structure's voxels, against the words ("opaque" wants >= 0.2, "faint"/"translucent"
   0.002-0.15, unqualified > 0.002).
-- **haze**: the share of the picture that only background makes visible (alpha > 0.05 when
-  every named or unnamed foreground label is removed). Background is air and noise: objects
-  nobody named (the bonsai's stand, the chest's patient table, the pot's soil) are unnamed
-  foreground, not haze. A limit: the labelled voxels are removed by setting them to 0, the
-  air's value, so where the object fills the volume's box (the chest at full size) a faint
-  tail over the air's value reads as a fog over the whole box although the picture shows none
-  (the foot-as-reference results for the chest at full size: 20-24 % "haze" on clean
-  pictures).
+- **haze**: the share of the picture that only background makes visible: pixels the picture
+  shows (alpha > 0.05) that the picture without its background does not (every unlabelled
+  voxel set to the TF's most transparent low value, :func:`transparent_value`). Background is
+  air and noise: objects nobody named (the bonsai's stand, the chest's patient table, the
+  pot's soil) are unnamed foreground, not haze. A fog in front of a structure is not counted
+  (that pixel is made by both); the largest share over the whole picture of a fog rendered
+  from the background alone is kept as ``fog`` in the JSON rows. The first version of this
+  measure rendered the background alone with the labelled voxels set to 0, the air's value:
+  where the object fills the volume's box (the chest at full size) a faint tail over the air's
+  value painted the whole body's place, and clean pictures read as 20-24 % "haze".
 
 Judges: ``metric`` (the built-in MetricJudge) and ``oracle`` (a labelling oracle: the fake
 model server names the structures from the label volumes, 10 % of the names wrong, and in each
@@ -230,11 +232,38 @@ class Scene:
             self._r[key] = VolumeRenderer(v, size=self.size, shading=False, background=(0, 0, 0))
         return self._r[key].render_rgba(tf, self.camera)
 
+    def alpha_without_background(self, tf) -> np.ndarray:
+        """The picture's alpha with every unlabelled voxel made invisible to ``tf``."""
+        value = transparent_value(tf)
+        key = f"nobg@{value:.4f}"
+        if key not in self._r:
+            data = np.where(self.lab > 0, self.vol.data, value).astype(np.float32)
+            self._r[key] = _renderer(self.vol, data, self.size)
+        return self._r[key].render_rgba(tf, self.camera)[..., 3]
+
     def image(self, tf, key: str = "all") -> np.ndarray:
         return self.renderer(key).render(tf, self.camera)
 
     def alpha(self, tf, key: str) -> np.ndarray:
         return self.renderer(key).render_rgba(tf, self.camera)[..., 3]
+
+
+def transparent_value(tf) -> float:
+    """The lowest value ``tf`` gives no opacity (below 1e-4), else its least opaque value
+    below its lowest visible Gaussian.
+
+    Low, so that the values between it and a structure's are those between air and the
+    structure: a removed background leaves no shell of other materials around what is left
+    (a value above the bone's once drew the chest's ribs as shells around the body).
+    """
+    grid = np.linspace(0.0, 1.0, 1025)
+    opacity = tf.opacity(grid)
+    clear = opacity < 1e-4
+    means = [g.mean for g in tf.gaussians if g.height > 1e-3]
+    low = grid <= min(means, default=1.0)
+    if clear[low].any():
+        return float(grid[int(np.argmax(clear & low))])
+    return float(grid[low][int(np.argmin(opacity[low]))])
 
 
 def _lab(img: np.ndarray) -> np.ndarray:
@@ -286,7 +315,9 @@ def measure(scene: Scene, tf, asked: dict[str, tuple]) -> dict:
               None: opacity > 0.002}.get(look, True)  # fmt: skip
         out["structures"][name] = {"dE": de, "opacity": opacity, "opacity_ok": bool(ok),
                                    "visible_share": float(mask.mean())}  # fmt: skip
-    out["haze"] = float((scene.alpha(tf, "bg") > 0.05).mean())
+    shown = scene.alpha(tf, "all") > 0.05
+    out["haze"] = float((shown & (scene.alpha_without_background(tf) <= 0.05)).mean())
+    out["fog"] = float((scene.alpha(tf, "bg") > 0.05).mean())
     return out
 
 
@@ -652,11 +683,12 @@ def summarise(rows: list[dict]) -> str:
 
 def table(rows: list[dict]) -> str:
     """Means over seeds: per case and named structure, ΔE at generation 0 and in the final best
-    for each judge, and the label TF's ΔE; then the largest haze share of each case."""
+    for each judge, and the label TF's ΔE; then the largest haze and fog shares of each case."""
     from collections import defaultdict
 
     de: dict = defaultdict(list)
     haze: dict = defaultdict(list)
+    fog: dict = defaultdict(list)
     order: list = []
     for r in rows:
         if "skipped" in r or r["case"] == "refine-pot":
@@ -668,6 +700,7 @@ def table(rows: list[dict]) -> str:
                 de[(r["case"], name, r["judge"], when)].append(r[when]["structures"][name]["dE"])
         if r["judge"] != "1-D":
             haze[r["case"]].append(max(r["gen0"]["haze"], r["final"]["haze"]))
+            fog[r["case"]].append(max(r["gen0"].get("fog", 0.0), r["final"].get("fog", 0.0)))
     cols = [("metric", "gen0"), ("metric", "final"), ("oracle", "gen0"), ("oracle", "final"),
             ("1-D", "final")]  # fmt: skip
     head = ["metric g0", "metric end", "oracle g0", "oracle end", "label TF"]
@@ -680,6 +713,8 @@ def table(rows: list[dict]) -> str:
         out.append(f"{case:14s} {name:13s} " + " ".join(cells))
     out.append("largest haze share (any seed, generation 0 or final): " + ", ".join(
         f"{c} {100 * max(h):.1f}%" for c, h in haze.items()))  # fmt: skip
+    out.append("largest fog share, the background rendered alone (over structures too): " +
+               ", ".join(f"{c} {100 * max(h):.1f}%" for c, h in fog.items()))  # fmt: skip
     return "\n".join(out)
 
 
