@@ -78,7 +78,7 @@ BOX_FIT = 0.93
 BOX_PENALTY = 0.5
 #: Share of the foreground that may be veil before the clarity falls.
 VEIL_TOLERATED = 0.1
-#: Grain (fine/medium energy ratio) above which the clarity falls, and how fast.
+#: Grain (speckle's fine over medium energy) above which the clarity falls, and how fast.
 GRAIN_FREE = 0.5
 GRAIN_RATE = 3.0
 #: Largest run of pixels (4-connected) that counts as a speck, not a line, in the grain.
