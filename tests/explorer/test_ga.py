@@ -11,6 +11,7 @@ import pytest
 from helpers.ranking import rank_by_target
 from intuitf.explorer import Bounds, Candidate, GeneticExplorer
 from intuitf.explorer.genome import near_duplicate
+from intuitf.explorer.stages import STAGES
 from intuitf.tf import Gaussian, GaussianTF
 
 
@@ -245,3 +246,17 @@ def test_palette_colours_new_gaussians_and_survives_the_state():
     assert GeneticExplorer.from_state(state).palette == tuple(tuple(c) for c in palette)
     with pytest.raises(ValueError, match="palette colour"):
         GeneticExplorer(population=4, palette=[(1.0, 2.0, 0.0)])
+
+
+def test_the_first_stage_paints_only_the_asked_colours():
+    """Judged on quality alone, the first stage ranked a teal-and-red chest above the
+    ivory-and-red ones the words asked for (colour separation): its new colours all come from
+    the palette, and the later stages still try others."""
+    palette = [(0.98, 0.96, 0.88), (0.86, 0.12, 0.12)]
+    ex = GeneticExplorer(population=40, n_gaussians=5, seed=3, palette=palette)
+    assert ex.stage.name == "initialize"
+    # Each a palette colour, varied a little (hue, saturation, lightness): none far from one.
+    colours = np.array([g.color for c in ex.ask() for g in c.tf.gaussians])
+    far = np.abs(colours[:, None] - np.array(palette)[None]).max(axis=2).min(axis=1)
+    assert far.max() < 0.45, far.max()  # a free colour is anywhere (0.81-0.86 before)
+    assert STAGES["customize"].palette_share < 1.0

@@ -164,8 +164,11 @@ class StagePreset:
 
 
 #: Initialization: quality aspects only, broad search with high rates that decay; two thirds
-#: of the first population on the histogram's materials.
-INITIALIZE = StagePreset(name="initialize", aspects="quality", toggle_prob=0.06)
+#: of the first population on the histogram's materials. When the intent names colours (a
+#: palette), every new colour is one of them: judged on quality alone, a teal-and-red chest
+#: outranked the ivory-and-red ones asked for (colour separation), so the first results
+#: showed colours nobody asked for. Customization tries other colours again.
+INITIALIZE = StagePreset(name="initialize", aspects="quality", toggle_prob=0.06, palette_share=1.0)
 
 #: Customization: intent aspects; rates raised again from where initialization left them
 #: (the schedule restarts), but positions barely move so the structures found are kept, and
