@@ -31,6 +31,55 @@ def test_a_potted_tree_splits_into_pot_trunk_and_leaves():
     )  # fmt: skip
 
 
+def test_soil_in_the_pot_and_the_trunk_rising_out_of_it_are_two_structures():
+    """One material, one connected piece: what the pot holds and what rises out of it."""
+    smap = build_structure_map(potted_tree(soil=True))
+    mid = [s for s in smap.foreground() if 0.4 < s.center < 0.6]
+    assert len(mid) == 2
+    trunk, soil = sorted(mid, key=lambda s: s.voxels)
+    assert trunk.shape in ("thin", "elongated") and trunk.height > soil.height
+    assert soil.position == "bottom" and soil.voxels > 5 * trunk.voxels
+    got = match_parts(["container", "stem"], smap)
+    assert got["stem"].id == trunk.id and got["container"].value_range[0] > 0.7
+
+
+def test_only_an_open_container_holds_what_rises_out_of_it():
+    """A pot holds its soil and lets the trunk out; closed by a lid (a skull over the brain),
+    what lies inside and what lies on top are not one thing held and one risen out of it."""
+    import numpy as np
+
+    from intuitf.intent.structures import held_by
+
+    n = 40
+    z, y, x = np.mgrid[0:n, 0:n, 0:n]
+    r = np.sqrt((x - 19.5) ** 2 + (y - 19.5) ** 2)
+    pot = (z >= 2) & (z <= 14) & (r <= 16) & ((r >= 13) | (z <= 4))
+    soil = (z > 4) & (z <= 12) & (r < 13)
+    trunk = (z > 4) & (z < 36) & (r <= 2)
+    part = soil | trunk
+    # axis: the array axis of z (0); sign +1: up is +z; the pot's wall is 3 voxels thick.
+    held = held_by(part, pot, 3.0, axis=0, sign=1, voxel=1.0)
+    assert held is not None
+    assert (held & soil).sum() == soil.sum() and (held & trunk & (z > 20)).sum() == 0
+    lid = pot | ((z >= 13) & (z <= 14) & (r <= 16))
+    assert held_by(part & ~lid, lid, 3.0, axis=0, sign=1, voxel=1.0) is None
+
+
+def test_value_ranges_come_from_the_volumes_own_voxels():
+    """A thin rod's block averages at the map's grid are pulled toward the air around it; its
+    value range is read from its own voxels."""
+    import numpy as np
+
+    n = 128
+    data = np.full((n, n, n), 0.02, np.float32)
+    data[20:110, 60:90, 30:100] = 0.3  # a slab, for the rod to stand on
+    data[20:110, 73:75, 64:66] = 0.3
+    data[10:120, 40:43, 40:43] = 0.7  # the rod: 3 voxels across, 4 per cell at 32³
+    smap = build_structure_map(data, max_dim=32)
+    rod = max(smap.foreground(), key=lambda s: s.value_range[1])
+    assert rod.value_range[1] > 0.65 and rod.value_range[0] > 0.6
+
+
 def test_the_map_round_trips_and_names_win():
     smap = build_structure_map(potted_tree())
     again = StructureMap.from_dict(smap.to_dict())

@@ -56,10 +56,11 @@ def _container(s, c):
 
 def _stem(s, c):
     # A stem stands in the open: the soil in a pot can branch as much (at 64³ the bonsai's
-    # soil is one branching piece, larger than the trunk), but the pot encloses it.
+    # soil is one branching piece, larger than the trunk), but the pot encloses it. Wood is
+    # denser than the foliage around it (whose faint halo branches too, and is larger).
     return (1.5 * _shape(s, "branching", "thin", "elongated") + 0.5 * (1.0 - abs(s.height - 0.5))
             + 0.5 * min(1.0, 4 * s.share) - 1.0 * _shape(s, "scattered", "plate")
-            + (0.5 if s.outer else 0.0))  # fmt: skip
+            + (0.5 if s.outer else 0.0) + 0.8 * c.rank(s))  # fmt: skip
 
 
 def _foliage(s, c):

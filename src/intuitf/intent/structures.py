@@ -17,8 +17,13 @@ what a word can be matched against:
 - **background**: the lowest material's part that touches the volume's border (air, the
   embedding, noise); a material made of specks only is noise.
 
-Everything is computed on a copy of the volume reduced to at most ``max_dim`` voxels per axis
-(the map is about parts a word can name, not about voxels). The map is pure data: building and
+One material's connected piece can be two things a word names: the soil an open container
+holds and the trunk rising out of it are split in two (:func:`held_by`).
+
+Everything but the value ranges is computed on a copy of the volume reduced to at most
+``max_dim`` voxels per axis (the map is about parts a word can name, not about voxels); the
+value ranges are read from the volume's own voxels in each part's cells (block averages pull
+a thin part's values toward the air around it). The map is pure data: building and
 caching are separate (:func:`build_structure_map` computes; the session caches the JSON form
 beside the volume's other caches, see :meth:`StructureMap.to_dict`).
 """
@@ -33,13 +38,17 @@ from scipy import ndimage
 from intuitf.tf.defaults import background_cutoff, find_materials
 
 #: The version of the decomposition: a cached map of another version is built again.
-STRUCTURE_MAP_VERSION = 2
+STRUCTURE_MAP_VERSION = 3
 #: Parts smaller than this share of the foreground are specks (merged into the material's rest).
 MIN_PART_SHARE = 0.004
 #: At most this many parts per material are kept as structures (the largest).
 MAX_PARTS = 6
 #: A material whose largest part holds less than this share of it is scattered (leaves, noise).
 SCATTERED = 0.35
+#: A part that an open container of another material holds this share of, at least, is two
+#: parts when enough of it rises out of the container: what the container holds and what
+#: rises out (the soil in the bonsai's pot and its trunk, one connected piece of one material).
+HELD = 0.2
 
 
 @dataclass(frozen=True)
@@ -316,14 +325,56 @@ def build_structure_map(
             )  # fmt: skip
             masks.append(part)
         del rest
+    structures, masks = _split_held(
+        structures, masks,
+        lambda sid, k, m: _describe(sid, k, m, small, mats[k], shape, sp, up_ax, up_sign, n_fg,
+                                    near_outside, pieces=1, span=span),
+        arr_ax, up_sign, float(sp[arr_ax]), n_fg,
+    )  # fmt: skip
     structures = _enclosure(structures, masks)
     labels = np.zeros(shape, np.int16)
     for st, m in zip(structures, masks, strict=True):
         labels[m & (labels == 0)] = st.id + 1
+    if f > 1:
+        structures = _full_value_ranges(structures, labels, np.asarray(data), f, mats)
     return StructureMap(
         mats, structures, up_ax, up_sign, tuple(int(s) for s in shape),  # type: ignore[arg-type]
         labels, tuple(float(v) for v in sp),  # type: ignore[arg-type]
     )  # fmt: skip
+
+
+def _full_value_ranges(
+    structures: list[Structure], labels: np.ndarray, data: np.ndarray, f: int,
+    mats: list[tuple[float, float]],
+) -> list[Structure]:  # fmt: skip
+    """Each part's 5-95 % value range read from the volume's own voxels, not the reduced grid's.
+
+    Block averages pull a thin part's values toward the air around it: at 64³ the bonsai's
+    trunk reads 0.29-0.54, its own voxels 0.35-0.65; a colour placed on the averages lands on
+    the rims of everything denser (the pot's outer surface passes through those values). The
+    voxels are those of the part's cells (every second one along each axis) within its
+    material's interval.
+    """
+    from dataclasses import replace
+
+    step = 2
+    idx = [np.minimum(np.arange(0, n, step) // f, m - 1) for n, m in zip(data.shape, labels.shape,
+                                                                       strict=True)]  # fmt: skip
+    lab = labels[np.ix_(*idx)]
+    vals = np.asarray(data[::step, ::step, ::step], dtype=np.float32)
+    out = []
+    for st in structures:
+        if st.background:
+            out.append(st)
+            continue
+        a, b = mats[st.material]
+        own = vals[(lab == st.id + 1) & (vals >= a) & (vals < max(b, a + 1e-6))]
+        if own.size < 20:
+            out.append(st)
+            continue
+        lo, hi = (float(v) for v in np.percentile(own, [5, 95]))
+        out.append(replace(st, value_range=(lo, hi)))
+    return out
 
 
 def shape_of(a: np.ndarray, axis: int) -> int:
@@ -385,13 +436,125 @@ def _shape_word(mask: np.ndarray, extents: tuple[float, float, float], thickness
         return "shell"
     thin = thickness < 0.12 * l1
     if thin and l2 / l1 > 0.45:
-        # Thin everywhere yet spread in two or three directions: a plate or branches.
-        return "branching" if l3 / l1 > 0.35 else "plate"
+        # Thin everywhere yet spread in two or three directions: a plate (or a bowl) when its
+        # third extent is small against its second, else branches (a tree's crown of boughs
+        # spreads as far in depth as in width).
+        return "branching" if l3 / l2 > 0.5 else "plate"
     if l1 / l2 > 2.2:
         return "thin" if thin else "elongated"
     if l2 / max(l3, 1e-6) > 2.5 and thickness < 0.2 * l2:
         return "plate"
     return "blob"
+
+
+def slice_hulls(mask: np.ndarray, axis: int) -> np.ndarray:
+    """Each slice across the up axis (array ``axis``) filled to the convex hull of ``mask``'s
+    cross-section there: what a container's walls surround (a pot's ring becomes a disc)."""
+    from skimage.morphology import convex_hull_image
+
+    out = np.zeros_like(mask)
+    for i in range(mask.shape[axis]):
+        sl = [slice(None)] * 3
+        sl[axis] = i
+        cut = mask[tuple(sl)]
+        if cut.sum() >= 3:
+            out[tuple(sl)] = convex_hull_image(cut)
+    return out
+
+
+def held_by(part: np.ndarray, container: np.ndarray, container_thickness: float, axis: int,
+            sign: int, voxel: float) -> np.ndarray | None:  # fmt: skip
+    """The voxels of ``part`` that the open ``container`` holds, or None when it holds too
+    little of it (:data:`HELD`).
+
+    A container holds what lies over its footprint (the hull of its outline seen along the up
+    axis) from its bottom up to one wall's thickness above its rim, the soil heaped in a pot
+    included. It holds it when its walls surround most of that: per slice across the up axis,
+    the hull of the container's cross-section (:func:`slice_hulls`) holds at least 60 % of it
+    (the bone of a foot lies over the footprint of its skin, but the skin is outside the
+    bone's walls).
+    """
+    from skimage.morphology import convex_hull_image
+
+    ax_other = tuple(a for a in range(3) if a != axis)
+    levels = np.flatnonzero(container.any(axis=ax_other))
+    if levels.size == 0:
+        return None
+    margin = int(np.ceil(container_thickness / max(voxel, 1e-9)))
+    idx = np.arange(container.shape[axis]).reshape([-1 if a == axis else 1 for a in range(3)])
+    below = idx <= levels[-1] + margin if sign > 0 else idx >= levels[0] - margin
+    footprint = np.expand_dims(convex_hull_image(container.any(axis=axis)), axis)
+    held = part & footprint & below & ~container
+    hulls = slice_hulls(container, axis)
+    walled = int((held & hulls).sum())
+    if walled < max(HELD * part.sum(), 0.6 * held.sum()):
+        return None
+    # Open at the top, and the part passes through the opening: at the container's top (its
+    # highest slice of a fair cross-section, not a stray voxel) its walls are a ring, not a
+    # cap, and the part lies inside the ring. A skull's top is a closed cap: the brain it
+    # holds does not reach through it to the scalp above.
+    area = container.sum(axis=ax_other)[levels]
+    fair = levels[area >= 0.2 * np.median(area)]
+    top = int(fair[-1] if sign > 0 else fair[0])
+    cut = [slice(None)] * 3
+    cut[axis] = slice(top, top + 1)
+    inside = (hulls & ~container)[tuple(cut)]
+    if inside.sum() < 0.25 * hulls[tuple(cut)].sum() or not (part[tuple(cut)] & inside).any():
+        return None
+    return held
+
+
+def _rises(piece: np.ndarray, container: np.ndarray, axis: int, sign: int) -> bool:
+    """Whether ``piece`` rises above ``container``'s rim by at least half the container's
+    own height (a trunk out of its pot, not a rim of soil heaped over it)."""
+    other = tuple(a for a in range(3) if a != axis)
+    c, p = np.flatnonzero(container.any(axis=other)), np.flatnonzero(piece.any(axis=other))
+    if c.size == 0 or p.size == 0:
+        return False
+    above = (p[-1] - c[-1]) if sign > 0 else (c[0] - p[0])
+    return bool(above >= 0.5 * (c[-1] - c[0] + 1))
+
+
+def _split_held(
+    structures: list[Structure], masks: list[np.ndarray], describe, axis: int, sign: int,
+    voxel: float, n_fg: int,
+) -> tuple[list[Structure], list[np.ndarray]]:  # fmt: skip
+    """Parts that a container of another material holds in part are split in two.
+
+    One material, one connected piece, two things a word names: the bonsai's soil fills its pot
+    and its trunk rises out of it, and at the map's resolution they touch. The piece the
+    container holds (:func:`held_by`) and the largest connected piece rising out of it (at
+    least :data:`MIN_PART_SHARE` of the object; smaller bits stay with the held piece) become
+    two structures, the one rising out first. Background, scattered parts and shells (they hold,
+    they are not held) are never split.
+    """
+    from dataclasses import replace
+
+    solid = [i for i, s in enumerate(structures)
+             if not s.background and s.shape not in ("scattered", "shell")]  # fmt: skip
+    out_s: list[Structure] = []
+    out_m: list[np.ndarray] = []
+    for i, s in enumerate(structures):
+        pieces = [masks[i]]
+        for j in solid if i in solid else []:
+            if j == i or structures[j].material == s.material:
+                continue
+            held = held_by(masks[i], masks[j], structures[j].thickness, axis, sign, voxel)
+            if held is None:
+                continue
+            lab, n = ndimage.label(masks[i] & ~held, structure=np.ones((3, 3, 3), bool))
+            if n == 0:
+                continue
+            sizes = np.bincount(lab.ravel())[1:]
+            risen = lab == int(np.argmax(sizes)) + 1
+            if sizes.max() >= MIN_PART_SHARE * n_fg and _rises(risen, masks[j], axis, sign):
+                pieces = [risen, masks[i] & ~risen]
+                break
+        for m in pieces:
+            sid = len(out_s)
+            out_s.append(replace(s, id=sid) if len(pieces) == 1 else describe(sid, s.material, m))
+            out_m.append(m)
+    return out_s, out_m
 
 
 def _enclosure(structures: list[Structure], masks: list[np.ndarray]) -> list[Structure]:
