@@ -20,12 +20,12 @@ what a word can be matched against:
 One material's connected piece can be two things a word names: the soil an open container
 holds and the trunk rising out of it are split in two (:func:`held_by`).
 
-Everything but the value ranges is computed on a copy of the volume reduced to at most
-``max_dim`` voxels per axis (the map is about parts a word can name, not about voxels); the
-value ranges are read from the volume's own voxels in each part's cells (block averages pull
-a thin part's values toward the air around it). The map is pure data: building and
-caching are separate (:func:`build_structure_map` computes; the session caches the JSON form
-beside the volume's other caches, see :meth:`StructureMap.to_dict`).
+Everything is computed on a copy of the volume reduced to at most ``max_dim`` voxels per axis
+(the map is about parts a word can name, not about voxels), except the upper end of each part's
+value range, read from the volume's own voxels (block averages pull a thin part's values toward
+the air around it). The map is pure data: building and caching are separate
+(:func:`build_structure_map` computes; the session caches the JSON form beside the volume's
+other caches, see :meth:`StructureMap.to_dict`).
 """
 
 from __future__ import annotations
@@ -347,14 +347,17 @@ def _full_value_ranges(
     structures: list[Structure], labels: np.ndarray, data: np.ndarray, f: int,
     mats: list[tuple[float, float]],
 ) -> list[Structure]:  # fmt: skip
-    """Each part's 5-95 % value range read from the volume's own voxels, not the reduced grid's.
+    """Each part's value range widened to its own voxels' 5-95 % range.
 
-    Block averages pull a thin part's values toward the air around it (a rod two voxels
-    across, in cells of four, averages to a quarter of its value), and a colour placed on the
-    averages lands on the rims of everything denser (the bonsai's pot's outer surface passes
-    through its trunk's averages; its pot reads 0.75-0.83 at 64³, 0.78-0.86 in its voxels). The
-    voxels are those of the part's cells (every second one along each axis) within its
-    material's interval.
+    Block averages pull a thin part's values toward the air around it (a rod three voxels
+    across, in cells of four, averages to under 60 % of its value): the bonsai's trunk read
+    0.29-0.54 at 64³, and its colour, placed on those values, fell on the rims of everything
+    denser (the pot's outer surface passes through them) more than on the trunk. The upper
+    end is read from the part's own voxels (those of its cells within its material's
+    interval, every second one along each axis); the lower end stays the lower of the two,
+    as for a thick part the grid's averages there are its surface, which is what shows it
+    (placed on the voxels' range alone, the engine's casing colour moved off its surface and
+    the first generation's casing went from ΔE 7 to 20).
     """
     from dataclasses import replace
 
@@ -374,7 +377,8 @@ def _full_value_ranges(
             out.append(st)
             continue
         lo, hi = (float(v) for v in np.percentile(own, [5, 95]))
-        out.append(replace(st, value_range=(lo, hi)))
+        out.append(replace(st, value_range=(min(lo, st.value_range[0]),
+                                            max(hi, st.value_range[1]))))  # fmt: skip
     return out
 
 
