@@ -467,10 +467,17 @@ def slice_hulls(mask: np.ndarray, axis: int) -> np.ndarray:
     return out
 
 
-def held_by(part: np.ndarray, container: np.ndarray, container_thickness: float, axis: int,
-            sign: int, voxel: float, hulls: np.ndarray | None = None) -> np.ndarray | None:  # fmt: skip
+def held_by(
+    part: np.ndarray,
+    container: np.ndarray,
+    container_thickness: float,
+    axis: int,
+    sign: int,
+    voxel: float,
+    hulls: np.ndarray | None = None,
+) -> np.ndarray | None:
     """The voxels of ``part`` that the open ``container`` holds, or None when it holds too
-    little of it (:data:`HELD`).
+    little of it (:data:`HELD`) or is closed at the top.
 
     A container holds what lies over its footprint (the hull of its outline seen along the up
     axis) from its bottom up to one wall's thickness above its rim, the soil heaped in a pot
