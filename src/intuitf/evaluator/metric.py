@@ -666,16 +666,32 @@ def _shaded_presence(f: _Features, name: str) -> float:
     lit = peak > 0.3
     if int(lit.sum()) < _REGION_MIN_PIXELS:
         return 0.0
-    shown = rgb2lab((rgb[lit] * (float(asked.max()) / peak[lit, None]))[None])[0]
-    near = _nearness(shown, _named_lab([name])[0])
+    near = _nearness(_brightened_lab(rgb[lit], peak[lit], float(asked.max())),
+                     _named_lab([name])[0])  # fmt: skip
     on = near > 0.5
     if int(on.sum()) < _REGION_MIN_PIXELS:
         return 0.0
     bright = float(np.percentile(peak[lit][on], 90))
     share = float(near.sum()) / rgb.shape[0]
-    return _saturating(share, _CLAUSE_SATURATION) * float(
-        np.exp(-abs(bright - float(asked.max())) / 0.3)
-    )
+    return _saturating(share, _CLAUSE_SATURATION) * _lightness_match(bright, float(asked.max()))
+
+
+def _brightened_lab(rgb: np.ndarray, peak: np.ndarray, level: float) -> np.ndarray:
+    """CIELAB of pixels ``rgb`` (N, 3, in [0, 1]) each brightened so that its max channel
+    (``peak``, N) is ``level``: their colour without the headlight's darkening."""
+    return rgb2lab((rgb * (level / peak[:, None]))[None])[0]
+
+
+#: How fast a solid colour's match falls as the brightest pixels showing it stay darker (or
+#: lighter) than the colour itself, in max-channel units.
+_LIGHTNESS_SCALE = 0.3
+
+
+def _lightness_match(bright: float, level: float) -> float:
+    """1 when the brightest pixels showing a colour (``bright``, max channel) are as light as
+    the colour (``level``), falling exponentially apart: brightening loses lightness, and
+    grey passes for white, or brown for orange, without this."""
+    return float(np.exp(-abs(bright - level) / _LIGHTNESS_SCALE))
 
 
 #: Below this many pixels, a named structure does not show in its region.
@@ -699,11 +715,11 @@ def _region_colour(f: _Features, region) -> float:
     if f.rgb is None or int(here.sum()) < _REGION_MIN_PIXELS:
         return 0.0
     rgb = f.rgb[here].astype(np.float32) / 255.0
-    peak = rgb.max(axis=1, keepdims=True)
-    lit = peak[:, 0] > 0.06  # darker pixels have no colour left to read
+    peak = rgb.max(axis=1)
+    lit = peak > 0.06  # darker pixels have no colour left to read
     if not lit.any():
         return 0.0
-    shown = rgb2lab((rgb[lit] * (0.95 / peak[lit]))[None])[0]
+    shown = _brightened_lab(rgb[lit], peak[lit], 0.95)
     asked = np.clip(np.asarray(region.rgb, dtype=np.float32), 0.0, 1.0)
     asked = asked * (0.95 / max(float(asked.max()), 1e-3))
     target = rgb2lab(asked[None, None])[0, 0]
@@ -713,8 +729,8 @@ def _region_colour(f: _Features, region) -> float:
         return hue  # a translucent layer is meant to show dimmer than its colour
     # Brightening loses lightness: brown is orange in shadow. A solid structure's lit side
     # shows its own lightness, so the region's bright pixels are compared with the colour's.
-    bright = float(np.percentile(peak[:, 0], 90))
-    return hue * float(np.exp(-abs(bright - float(np.max(region.rgb))) / 0.3))
+    bright = float(np.percentile(peak, 90))
+    return hue * _lightness_match(bright, float(np.max(region.rgb)))
 
 
 def _saturating(share: float, full: float) -> float:
