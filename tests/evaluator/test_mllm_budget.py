@@ -132,8 +132,11 @@ def test_a_send_gate_stops_queued_requests_unsent_and_frees_their_budget(oracle_
             return done
 
         done = asyncio.run(scenario())
-    assert not isinstance(done[0], BaseException)  # the one sent is answered and kept
-    assert all(isinstance(d, RunCancelled) for d in done[1:])
+    # The one sent is answered and kept, the three waiting are stopped. Which of the four
+    # takes the single slot first is asyncio's choice, not the order the tasks were made in.
+    sent = [d for d in done if not isinstance(d, BaseException)]
+    assert len(sent) == 1
+    assert sum(isinstance(d, RunCancelled) for d in done) == 3
     assert srv.stats.requests == 1
     assert budget.calls == 1 and budget.remaining_calls == 99
     assert budget._reserved_calls == 0  # nothing left reserved by the stopped requests
