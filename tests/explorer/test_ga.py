@@ -260,3 +260,23 @@ def test_the_first_stage_paints_only_the_asked_colours():
     far = np.abs(colours[:, None] - np.array(palette)[None]).max(axis=2).min(axis=1)
     assert far.max() < 0.45, far.max()  # a free colour is anywhere (0.81-0.86 before)
     assert STAGES["customize"].palette_share < 1.0
+
+
+def test_the_first_stage_keeps_the_asked_colours_through_its_generations():
+    """Its mutations too: a channel permutation or hue steps of the gold asked for made a pink
+    or green tree, which led the bonsai's generation 1 (nothing in the first stage judges the
+    words). Customization still steps colours freely."""
+    palette = [(0.85, 0.67, 0.2), (0.45, 0.27, 0.15)]
+    ex = GeneticExplorer(population=24, n_gaussians=5, generations=8, seed=5, palette=palette)
+    rng = np.random.default_rng(0)
+    far_max = 0.0
+    for _ in range(4):
+        cands = ex.ask()
+        assert ex.stage.name == "initialize"
+        colours = np.array([g.color for c in cands for g in c.tf.gaussians])
+        far = np.abs(colours[:, None] - np.array(palette)[None]).max(axis=2).min(axis=1)
+        far_max = max(far_max, float(far.max()))
+        ex.tell([cands[int(i)].id for i in rng.permutation(len(cands))])
+    assert far_max < 0.45, far_max
+    params = STAGES["customize"].mutation_params(0.0, palette)
+    assert not params.palette_only and params.color_rate > 0

@@ -12,12 +12,14 @@ screenshots to look at (run by tests/web/test_walk_case_studies.py, or by hand):
    best picture given as the reference for a head CT, a run from that picture alone.
 
 ``INTUITF_WALK_FULL=1`` runs each search at the size of the paper's examples (population 16,
-6 generations, 128² pictures) for screenshots worth looking at; the test runs them small.
+6 generations, 128² pictures) on the volumes at full size, as ``intuitf serve`` loads them,
+for screenshots worth looking at; the test runs them small, on volumes downsampled to 64³.
 
 Along the way it checks what a person would notice: the volume choice holds, no request of
 the page fails with 404, pending pictures look pending, Undo is disabled with nothing to undo,
 the export menu closes after a download, runs can be renamed and deleted.
-Real volumes come from ../shared/data/volumes, downsampled (--max-dim) to keep runs short.
+Real volumes come from ../shared/data/volumes; the test downsamples them (--max-dim) to keep
+runs short.
 """
 
 from __future__ import annotations
@@ -54,14 +56,15 @@ def have_data() -> bool:
 class Server:
     """``intuitf serve`` over the three case volumes (downsampled), on a free port."""
 
-    def __init__(self, root: Path, max_dim: int = 64) -> None:
+    def __init__(self, root: Path, max_dim: int | None = 64) -> None:
         with socket.socket() as s:
             s.bind(("127.0.0.1", 0))
             port = s.getsockname()[1]
         env = {**os.environ, "PYTHONUNBUFFERED": "1", "COLUMNS": "240", "NO_COLOR": "1"}
         env.pop("INTUITF_TOKEN", None)
         cmd = [sys.executable, "-m", "intuitf", "serve", "--no-browser", "--port", str(port),
-               "--runs", str(root / "runs"), "--max-dim", str(max_dim),
+               "--runs", str(root / "runs"),
+               *(["--max-dim", str(max_dim)] if max_dim else []),
                *[str(DATA / c) for c in CASES]]  # fmt: skip
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                      text=True, env=env)  # fmt: skip
@@ -374,7 +377,9 @@ if __name__ == "__main__":  # pragma: no cover - by hand
     from helpers.browser import CHROMIUM, CHROMIUM_ARGS
 
     target = Path(sys.argv[1] if len(sys.argv) > 1 else "walk-shots")
-    srv = Server(Path(tempfile.mkdtemp()))
+    srv = Server(
+        Path(tempfile.mkdtemp()), max_dim=None if os.environ.get("INTUITF_WALK_FULL") else 64
+    )
     try:
         with sync_playwright() as pw:
             b = pw.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)

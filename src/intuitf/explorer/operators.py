@@ -64,6 +64,9 @@ class MutationParams:
     #: replaced by one of them (slightly varied) instead of taking HSL steps.
     palette: tuple[tuple[float, float, float], ...] = ()
     recolor_prob: float = 0.0
+    #: With a palette: a colour changes only by a jump to one of its colours (with
+    #: ``color_rate``), never by HSL steps or channel permutations.
+    palette_only: bool = False
     #: Materials the intent names (:class:`~intuitf.explorer.hints.Hint`); with
     #: ``hint_prob`` per Gaussian, a Gaussian on a hinted material takes that hint's colour
     #: (slightly varied) and a height from its opacity band.
@@ -82,6 +85,12 @@ def _mutate_color(
     b: Bounds,
     own: tuple[float, float, float] | None = None,
 ) -> tuple[float, float, float]:
+    if p.palette and p.palette_only:
+        # A stage that does not judge the words keeps the colours they ask for (a hue step
+        # or a channel permutation of gold is a green or pink tree that nothing rejects).
+        if rng.random() < max(p.recolor_prob, p.color_rate):
+            return b.sample_palette_color(rng, [own] if own is not None else p.palette)
+        return color
     if p.palette and rng.random() < p.recolor_prob:
         # A jump to a colour the intent names: HSL steps take many generations to get there.
         # On a material the words give a colour (``own``), that colour, not another's.
