@@ -263,9 +263,9 @@ def test_the_first_stage_paints_only_the_asked_colours():
 
 
 def test_the_first_stage_keeps_the_asked_colours_through_its_generations():
-    """Its mutations too: a channel permutation or hue steps of the gold asked for made a pink
-    or green tree, which led the bonsai's generation 1 (nothing in the first stage judges the
-    words). Customization still steps colours freely."""
+    """The first stage's mutations keep the asked colours too: a channel permutation or hue
+    steps of the gold asked for made a pink or green tree, which led the bonsai's generation 1
+    (nothing in the first stage judges the words). Customization still steps colours freely."""
     palette = [(0.85, 0.67, 0.2), (0.45, 0.27, 0.15)]
     ex = GeneticExplorer(population=24, n_gaussians=5, generations=8, seed=5, palette=palette)
     rng = np.random.default_rng(0)

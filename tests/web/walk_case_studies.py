@@ -54,7 +54,8 @@ def have_data() -> bool:
 
 
 class Server:
-    """``intuitf serve`` over the three case volumes (downsampled), on a free port."""
+    """``intuitf serve`` over the case volumes, on a free port: downsampled to at most
+    ``max_dim`` voxels per axis, or at full size when ``max_dim`` is None."""
 
     def __init__(self, root: Path, max_dim: int | None = 64) -> None:
         with socket.socket() as s:
