@@ -85,16 +85,16 @@ def _mutate_color(
     b: Bounds,
     own: tuple[float, float, float] | None = None,
 ) -> tuple[float, float, float]:
-    if p.palette and p.palette_only:
-        # A stage that does not judge the words keeps the colours they ask for (a hue step
-        # or a channel permutation of gold is a green or pink tree that nothing rejects).
-        if rng.random() < max(p.recolor_prob, p.color_rate):
-            return b.sample_palette_color(rng, [own] if own is not None else p.palette)
-        return color
-    if p.palette and rng.random() < p.recolor_prob:
+    # With palette_only, a jump is the only way a colour changes, at the colour rate: a stage
+    # that does not judge the words keeps the colours they ask for (a hue step or a channel
+    # permutation of gold is a green or pink tree that nothing rejects).
+    jump = max(p.recolor_prob, p.color_rate) if p.palette_only else p.recolor_prob
+    if p.palette and rng.random() < jump:
         # A jump to a colour the intent names: HSL steps take many generations to get there.
         # On a material the words give a colour (``own``), that colour, not another's.
         return b.sample_palette_color(rng, [own] if own is not None else p.palette)
+    if p.palette and p.palette_only:
+        return color
     if rng.random() < p.channel_prob:
         # Recombine the colour's own channels: a new hue of the same saturation and lightness.
         perm = rng.permutation(3)
