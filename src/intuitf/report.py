@@ -362,6 +362,10 @@ def report_html(c: RunContents) -> str:
         f"<div><h3 class='note'>Cost</h3>{_table(_costs(c))}</div>",
         "</div>",
     ]
+    understood = run.get("understood")
+    if isinstance(understood, list) and understood:
+        items = "".join(f"<li>{html.escape(str(line))}</li>" for line in understood)
+        parts.append(f'<h3 class="note">Understood</h3><ul class="understood">{items}</ul>')
     warning = _match_stats(c).warning
     if warning:
         parts.append(f'<p class="warn"><strong>Warning:</strong> {html.escape(warning)}</p>')

@@ -71,6 +71,9 @@ def test_optimize_with_metric_judge_writes_a_run(tmp_path):
     assert "Best transfer functions" in proc.stdout
     assert (run / "report.html").exists() and (run / "best" / "rank01.vp").exists()
     assert _generations(run) == [0, 1, 2, 3]
+    # How the words were read is said before the run, and kept with it.
+    assert "Understood:" in proc.stdout and '"bone": red' in proc.stdout
+    assert json.loads((run / "run.json").read_text())["understood"][0].startswith('"bone": red')
     # The colours named in --text ("red bone, faint blue skin") are the explorer's palette.
     palette = json.loads((run / "checkpoint.json").read_text())["explorer"]["palette"]
     assert len(palette) == 2 and palette[0][0] > 0.8 and palette[1][2] > 0.8

@@ -125,3 +125,6 @@ def test_two_strokes_on_one_material_go_to_it_and_to_the_material_behind_the_thi
     # The cap stays red where thick and lets the yellow through where thin: translucent.
     assert red.height == SEE_THROUGH and yellow.height == VISIBLE
     assert SEE_THROUGH[1] < VISIBLE[1]
+    # What became of each stroke is said in words a person can check.
+    assert any("same material as the red stroke" in n for n in yellow.notes)
+    assert any("translucent" in n and "yellow" in n for n in red.notes)

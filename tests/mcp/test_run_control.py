@@ -38,8 +38,11 @@ def test_pause_continue_budget_and_cancel(folders, slow_model):
     async def main():
         async with Client(server) as client:
             vid = (await call(client, "open_volume", path="phantom", max_dim=32))["id"]
-            run = (await call(client, "start_run", volume=vid, intent="white bone",
-                              judge=fake_model.base_url, settings=SETTINGS))["run"]  # fmt: skip
+            started = await call(client, "start_run", volume=vid, intent="white bone",
+                                 judge=fake_model.base_url, settings=SETTINGS)  # fmt: skip
+            run = started["run"]
+            # The agent is told how its words were read, as a person is.
+            assert started["understood"][0].startswith('"bone": white')
             paused = await call(client, "pause_run", run=run)
             assert paused["paused"] is True
             status = await call(client, "run_status", run=run)

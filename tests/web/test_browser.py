@@ -183,6 +183,9 @@ def test_case_study_text_query_select_refine_branch_overrule(page, web_server, s
         " document.querySelector('#gallery-grid .card').dataset.qid"
     )
     assert "completed" in page.inner_text("[data-testid=run-status]")
+    # How the words were read shows under the run: each named part, where it landed.
+    read = page.inner_text(f".run-node[data-run='{run}'] [data-testid=understood]")
+    assert '"bone": ivory, opaque' in read and '"skin": red, faint' in read
 
     # 2. Click a structure in the volume view: it is outlined at once and selected below.
     page.wait_for_selector("#features-strip .feature")

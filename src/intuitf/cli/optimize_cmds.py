@@ -385,6 +385,7 @@ def register(app: typer.Typer) -> None:
             f"population {session.settings.population}, {session.total_generations} generations "
             f"({', '.join(f'{s} {n}' for s, n in session.plan)}); run folder {session.run_dir.root}"
         )
+        _print_understood(session)
         outcome = _run_with_progress(session)
         _print_summary(outcome, session, started)
         if not outcome.completed:
@@ -422,6 +423,16 @@ def register(app: typer.Typer) -> None:
                 f"Open {outcome.run_dir / 'report.html'} in a browser to see the results.",
                 soft_wrap=True,
             )
+
+
+def _print_understood(session) -> None:
+    """How the intent was read on the volume (words to structures, strokes to values), so a
+    colour on the wrong part is explained before the first generation ends."""
+    lines = getattr(session, "understood", None) or []
+    if lines:
+        console.print("Understood:")
+        for line in lines:
+            console.print(f"  {escape(line)}", soft_wrap=True)
 
 
 def _check_can_create(folder: Path) -> None:

@@ -61,3 +61,15 @@ def named_colours(text: str) -> list[str]:
         if m.group(1) not in found:
             found.append(m.group(1))
     return found
+
+
+def colour_word(rgb) -> str:
+    """The name of the named colour nearest ``rgb`` (three values in [0, 1]), in CIELAB:
+    how a person would call a stroke's or a reference layer's colour ("red", "light blue")."""
+    import numpy as np
+    from skimage.color import rgb2lab
+
+    names = list(NAMED_COLOURS)
+    table = np.array([NAMED_COLOURS[n] for n in names], dtype=np.float64) / 255.0
+    labs = rgb2lab(np.vstack([table, np.clip(np.asarray(rgb, np.float64), 0, 1)])[None])[0]
+    return names[int(np.argmin(np.linalg.norm(labs[:-1] - labs[-1], axis=1)))]

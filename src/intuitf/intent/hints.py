@@ -159,7 +159,8 @@ _KNOWN_WORDS = set(
     same whole change changed turn turned set should can could must so then there here
     inside within through beneath underneath between among above below near
     where which what see seen one two three both either neither like style tone toned
-    bright brighter dark darker light pale deep vivid rich soft strong""".split()
+    bright brighter dark darker light pale deep vivid rich soft strong
+    object thing model specimen sample tree plant potted""".split()
 )
 
 _WORD_RE = re.compile(r"[a-z][a-z'-]*")

@@ -16,11 +16,12 @@ Pure computation on the volume's array and the camera's geometry (no renderer, n
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import ndimage
 
+from intuitf.intent.colours import colour_word
 from intuitf.render.camera import Camera
 
 #: Depth (in voxels) behind the entry point where the surface's own material is looked for.
@@ -54,6 +55,9 @@ class StrokeHint:
     #: Gaussian heights: visible by default; translucent for a material another stroke looks
     #: through where it is thin (see :func:`stroke_hints`).
     height: tuple[float, float] = VISIBLE
+    #: What became of the stroke, for a person to read ("taken for the material behind ..."):
+    #: empty when it simply colours the values under it.
+    notes: tuple[str, ...] = ()
 
     def to_explorer(self) -> dict:
         return {
@@ -196,12 +200,30 @@ def stroke_hints(
                 mover.behind_share = 0.0  # moved once
                 # Its colour shows only where the material on top is thin and translucent.
                 stays.height = SEE_THROUGH
+                mover.notes.append(
+                    f"lies on the same material as the {stays.word} stroke: taken for the"
+                    " material behind its thin surface"
+                )
+                stays.notes.append(
+                    f"shown translucent, so that the {mover.word} stroke's colour shows where"
+                    " it is thin"
+                )
     # Strokes on overlapping values: each keeps to its side of the midpoint between medians.
     found.sort(key=lambda f: f.center)
     for low, high in zip(found, found[1:], strict=False):
         gap = high.center - low.center
         if gap < 2.5 * (low.spread + high.spread):
             low.spread = high.spread = max(0.006, gap / 5.0)
+            # One 1-D transfer function colours values, not places: say what is lost.
+            for f, o in ((low, high), (high, low)):
+                f.notes.append(
+                    f"lies on the same material as the {o.word} stroke, which a 1-D transfer"
+                    " function gives one colour: the two split its values, so each shows only"
+                    " in part"
+                    if gap < SAME_MATERIAL
+                    else f"lies on values close to the {o.word} stroke's: the two split them,"
+                    " so each may show only in part"
+                )
     return [
         StrokeHint(
             (f.rgb[0] / 255.0, f.rgb[1] / 255.0, f.rgb[2] / 255.0),
@@ -210,6 +232,7 @@ def stroke_hints(
             f.spread,
             f.hit_share,
             f.height,
+            tuple(f.notes),
         )
         for f in found
     ]
@@ -227,3 +250,9 @@ class _Stroke:
     behind: np.ndarray  # values of the material behind its surface, per pixel that has one
     behind_share: float
     height: tuple[float, float] = VISIBLE
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def word(self) -> str:
+        """The stroke's colour as a person calls it ("red")."""
+        return colour_word(tuple(c / 255.0 for c in self.rgb))

@@ -187,6 +187,8 @@ class RunDesk:
                 "plan": [list(p) for p in snap.plan],
                 "population": session.settings.population,
                 "path": str(session.run_dir.root) if session.run_dir else None,
+                # How the words were read on the volume: check before waiting on results.
+                "understood": list(session.understood),
                 "next": "Follow it with run_status or wait_for_generation; see results with gallery.",
             }
         )

@@ -22,6 +22,17 @@ def _palette_hint(intent: Intent, settings: RunSettings) -> list[tuple[float, fl
     return intent_palette(intent, background=(r, g, b))
 
 
+def _read_back(intent: Intent, settings: RunSettings, volume: Volume) -> list[str]:
+    """How the intent is read on the volume, in lines a person can check
+    (:func:`intuitf.intent.readback.read_back`); none when the run does not use them
+    (``material_hints`` off)."""
+    from intuitf.intent.readback import read_back
+
+    if not getattr(settings, "material_hints", True):
+        return []
+    return read_back(intent, volume, camera=settings.camera or None)
+
+
 def _material_hints(intent: Intent, settings: RunSettings, volume: Volume) -> list[dict]:
     """The materials the intent's words name, placed on the volume (see ``RunSettings``)."""
     if not getattr(settings, "material_hints", True):

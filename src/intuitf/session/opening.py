@@ -23,6 +23,7 @@ from intuitf.session.helpers import (
     _material_hints,
     _paid,
     _palette_hint,
+    _read_back,
     _with_selection,
 )
 from intuitf.session.recorder import recorder_for
@@ -169,6 +170,7 @@ def _new(
     # the intent that the first generation's hints are made from match them by name.
     naming = _name_structures(volume, judge, settings)
     counts, _ = volume.histogram()
+    understood = _read_back(intent, settings, volume)
     explorer = make_explorer(
         settings.explorer,
         population=settings.population,
@@ -213,6 +215,7 @@ def _new(
                 "versions": _versions(),
                 "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
                 **({"structures": naming.to_dict()} if naming is not None else {}),
+                "understood": understood,
             }
         )
         rd.append_journal({"type": "stage", "generation": 0, "stage": plan[0][0]})
@@ -227,6 +230,7 @@ def _new(
         lock=lock,
         cost=Cost(**naming.cost.to_dict()) if naming is not None else None,
     )
+    sess.understood = understood
     sess.events.emit("stage_started", stage=plan[0][0], generations=plan[0][1], generation=0)
     return sess
 
@@ -339,6 +343,7 @@ def resume_session(
         else:
             sess = _from_checkpoint(cls, vol, intent, judge, settings, rd, ckpt, spec, lock)
         sess.judge_moved = moved
+        sess.understood = [str(x) for x in record.get("understood") or []]
         if moved:
             sess.recorder.journal(
                 {"type": "judge", "generation": generation, "judge": _judge_name(judge)}

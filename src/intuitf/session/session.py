@@ -274,6 +274,8 @@ class Session:
 
         self.volume = volume
         self.intent = intent
+        #: How the intent was read on the volume, for a person to check (set at opening).
+        self.understood: list[str] = []
         self.judge = judge
         self.settings = settings
         self.run_dir = run_dir

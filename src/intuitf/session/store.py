@@ -43,6 +43,8 @@ class RunInfo:
     judge: str
     parent: dict[str, Any] | None
     message: str = ""
+    #: How the intent was read on the volume (lines; see :mod:`intuitf.intent.readback`).
+    understood: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         d = dict(self.__dict__)
@@ -168,6 +170,7 @@ class RunStore:
             judge=str(record.get("judge", "")),
             parent=parent,
             message=str((ended or {}).get("message", "")),
+            understood=[str(x) for x in record.get("understood") or []],
         )
 
     # -- the tree -------------------------------------------------------------------------

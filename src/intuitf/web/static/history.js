@@ -200,8 +200,27 @@ function renderRun(node, depth) {
     `div.run-node${isCurrentRun ? ".current-run" : ""}${depth ? ".branch" : ""}`,
     { dataset: { run: info.name } },
     head,
+    isCurrentRun ? understood(info) : null,
     list,
     loose.length ? el("div.branches.loose", {}, loose.map((k) => renderRun(k, depth + 1))) : null,
+  );
+}
+
+/** How the run's intent was read on its volume (words to structures, strokes to values), as
+ * a list under the current run's head: a colour on an unexpected part is explained there. */
+const understoodClosed = new Set(); // runs whose list the person folded: kept folded on redraw
+function understood(info) {
+  const lines = info.understood || [];
+  if (!lines.length) return null;
+  return el(
+    "details.run-understood",
+    {
+      "data-testid": "understood",
+      open: !understoodClosed.has(info.name),
+      on: { toggle: (e) => (e.target.open ? understoodClosed.delete(info.name) : understoodClosed.add(info.name)) },
+    },
+    el("summary", { text: "Understood" }),
+    el("ul", {}, lines.map((line) => el("li", { text: line }))),
   );
 }
 
