@@ -128,3 +128,32 @@ def test_two_strokes_on_one_material_go_to_it_and_to_the_material_behind_the_thi
     # What became of each stroke is said in words a person can check.
     assert any("same material as the red stroke" in n for n in yellow.notes)
     assert any("translucent" in n and "yellow" in n for n in red.notes)
+
+
+def test_a_strokes_edge_in_a_neighbouring_colour_bin_is_the_same_stroke():
+    """A stroke drawn in #30a0ff has antialiased pixels at 47 beside 48 (another bin): they
+    are its edge, not a second blue stroke competing with it for the same values."""
+    sk = np.zeros((40, 40, 4), np.uint8)
+    sk[10:14, 5:35] = (48, 160, 255, 255)
+    sk[9, 5:35] = (47, 159, 250, 128)  # the edge, one bin lower
+    sk[30:33, 5:35] = (139, 0, 0, 255)  # dark red
+    sk[34:36, 5:35] = (220, 30, 30, 255)  # red: another stroke, though near dark red
+    got = strokes_of(sk)
+    assert len(got) == 3
+    blue = next(mask for rgb, mask in got if rgb[2] > 200)
+    assert blue.sum() == 4 * 30 + 30
+
+
+def test_the_judge_counts_a_strokes_edge_with_its_stroke():
+    """Each stroke counts alike in the judge's stroke measure; a stroke's antialiased edge in a
+    neighbouring colour bin is part of it, not a stroke of its own that weighs as much."""
+    sk = np.zeros((40, 40, 4), np.uint8)
+    sk[10:14, 5:35] = (48, 160, 255, 255)
+    sk[9, 5:35] = (47, 159, 250, 128)
+    img = np.zeros((40, 40, 3), np.uint8)
+    img[10:14, 5:35] = (48, 160, 255)  # the stroke met; its one-pixel edge shows black
+    judge = MetricJudge()
+    score = judge._stroke(judge.features(img), Intent(kind="sketch", sketch=sk))
+    # The edge is a fifth of the stroke's pixels: about a fifth of black's distance, not half.
+    black = float(np.linalg.norm(judge.features(img).lab[10, 10] - judge.features(img).lab[0, 0]))
+    assert -0.3 * black < score < -0.1 * black

@@ -510,10 +510,9 @@ class MetricJudge:
         if intent.base is not None:
             shown = _resize_mask(self.features(intent.base).fg, f.lab.shape[:2])
             de = np.where(shown & ~f.fg, _ABSENT_DELTA_E, de)
-        keys = np.round(stroke_lab[mask] / 4.0).astype(np.int64)
-        _, which = np.unique(keys, axis=0, return_inverse=True)
-        per = np.bincount(which.ravel(), weights=de[mask]) / np.bincount(which.ravel())
-        return -float(per.mean())
+        which = _stroke_ids(intent, f.lab.shape[:2])[mask]
+        per = np.bincount(which, weights=de[mask]) / np.maximum(np.bincount(which), 1)
+        return -float(per[np.bincount(which) > 0].mean())
 
     def _preserve(self, f: _Features, intent: Intent) -> float | None:
         if intent.base is None:
@@ -876,6 +875,27 @@ def _strokes(intent: Intent, shape: tuple[int, int]) -> tuple[np.ndarray | None,
     alpha = _resize_like(sk[..., 3], shape, order=0) > 0
     rgb = _resize_like(sk[..., :3], shape, order=0).astype(np.float32) / 255.0
     return alpha, rgb2lab(rgb).astype(np.float32)
+
+
+def _stroke_ids(intent: Intent, shape: tuple[int, int]) -> np.ndarray:
+    """Per pixel (resized to ``shape``), which stroke of the sketch it is (0: none drawn or
+    a speck too small to be a stroke), as :func:`intuitf.intent.strokes.strokes_of` groups
+    them: a stroke's antialiased edge is the stroke, not one more stroke counted alike."""
+    from intuitf.intent.strokes import strokes_of
+
+    sk = np.asarray(intent.sketch)
+    key = (_digest(sk), shape)
+    if key not in _STROKE_IDS:  # one sketch, judged on every picture of a run
+        ids = np.zeros(sk.shape[:2], np.int64)
+        for k, (_, stroke) in enumerate(strokes_of(sk, min_pixels=1), start=1):
+            ids[stroke] = k
+        if len(_STROKE_IDS) > 8:
+            _STROKE_IDS.clear()
+        _STROKE_IDS[key] = _resize_like(ids, shape, order=0).astype(np.int64)
+    return _STROKE_IDS[key]
+
+
+_STROKE_IDS: dict[tuple[str, tuple[int, int]], np.ndarray] = {}
 
 
 #: Measures whose tie tolerance is relative (a share of the larger score).

@@ -26,6 +26,9 @@ from intuitf.render.camera import Camera
 
 #: Depth (in voxels) behind the entry point where the surface's own material is looked for.
 SURFACE_DEPTH = 3.0
+#: Drawn colours within this (max RGB channel difference, 0-255) of a larger stroke's colour
+#: are that stroke (red and dark red, yellow and orange stay apart).
+SAME_STROKE = 40
 #: Most pixels used per stroke (a random subset of a longer one).
 MAX_PIXELS = 400
 #: Depth (voxels) past the surface layer where the material behind it is looked for.
@@ -71,22 +74,33 @@ class StrokeHint:
 
 
 def strokes_of(sketch: np.ndarray, min_pixels: int = 6) -> list[tuple[tuple[int, ...], np.ndarray]]:
-    """The strokes of an RGBA sketch: (colour, mask) for each colour drawn (alpha > 0)."""
+    """The strokes of an RGBA sketch: (colour, mask) for each colour drawn (alpha > 0).
+
+    Colours are binned (16 levels per channel), and a bin within :data:`SAME_STROKE` of a
+    larger one's colour joins it: a stroke's antialiased edge, or a colour that sits on a bin's
+    boundary (48 = 0x30 beside 47), is the same stroke, not a second one of its colour (which
+    then competed with it for the same values).
+    """
     sk = np.asarray(sketch)
     drawn = sk[..., 3] > 0
     if not drawn.any():
         return []
-    # Colours quantised to 16 levels per channel: antialiased edges join their stroke.
     q = (sk[..., :3].astype(np.int32) // 16) * 16 + 8
     keys = q[..., 0] * 65536 + q[..., 1] * 256 + q[..., 2]
-    out = []
     vals, counts = np.unique(keys[drawn], return_counts=True)
-    for v, n in zip(vals, counts, strict=True):
-        if n < min_pixels:
-            continue
+    strokes: list[tuple[np.ndarray, np.ndarray]] = []  # (colour of its largest bin, mask)
+    for v in vals[np.argsort(-counts, kind="stable")]:
         mask = drawn & (keys == v)
-        rgb = tuple(int(c) for c in np.median(sk[mask][:, :3], axis=0))
-        out.append((rgb, mask))
+        rgb = np.median(sk[mask][:, :3], axis=0)
+        near = [k for k, (c, _) in enumerate(strokes) if np.abs(c - rgb).max() <= SAME_STROKE]
+        if near:
+            strokes[near[0]][1][mask] = True
+        else:
+            strokes.append((rgb, mask.copy()))
+    out = []
+    for _, mask in strokes:
+        if int(mask.sum()) >= min_pixels:
+            out.append((tuple(int(c) for c in np.median(sk[mask][:, :3], axis=0)), mask))
     return out
 
 
@@ -232,7 +246,7 @@ def stroke_hints(
             f.spread,
             f.hit_share,
             f.height,
-            tuple(f.notes),
+            tuple(dict.fromkeys(f.notes)),
         )
         for f in found
     ]
