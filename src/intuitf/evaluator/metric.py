@@ -878,9 +878,9 @@ def _strokes(intent: Intent, shape: tuple[int, int]) -> tuple[np.ndarray | None,
 
 
 def _stroke_ids(intent: Intent, shape: tuple[int, int]) -> np.ndarray:
-    """Per pixel (resized to ``shape``), which stroke of the sketch it is (0: none drawn or
-    a speck too small to be a stroke), as :func:`intuitf.intent.strokes.strokes_of` groups
-    them: a stroke's antialiased edge is the stroke, not one more stroke counted alike."""
+    """Per pixel (resized to ``shape``), which stroke of the sketch it is (0: nothing drawn),
+    as :func:`intuitf.intent.strokes.strokes_of` groups them: a stroke's antialiased edge is
+    the stroke, not one more stroke counted alike."""
     from intuitf.intent.strokes import strokes_of
 
     sk = np.asarray(intent.sketch)
