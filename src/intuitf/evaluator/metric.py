@@ -511,8 +511,9 @@ class MetricJudge:
             shown = _resize_mask(self.features(intent.base).fg, f.lab.shape[:2])
             de = np.where(shown & ~f.fg, _ABSENT_DELTA_E, de)
         which = _stroke_ids(intent, f.lab.shape[:2])[mask]
-        per = np.bincount(which, weights=de[mask]) / np.maximum(np.bincount(which), 1)
-        return -float(per[np.bincount(which) > 0].mean())
+        counts = np.bincount(which)
+        per = np.bincount(which, weights=de[mask]) / np.maximum(counts, 1)
+        return -float(per[counts > 0].mean())
 
     def _preserve(self, f: _Features, intent: Intent) -> float | None:
         if intent.base is None:

@@ -723,8 +723,35 @@ def _edit_hint(text: str) -> MaterialHint:
     )  # fmt: skip
 
 
-def explorer_hints(
+@dataclass
+class IntentReading:
+    """What an intent says about single materials on a volume: its words' hints (``text``)
+    and, for a sketch, one hint per stroke (:class:`intuitf.intent.strokes.StrokeHint`).
+    Read once per run, it gives the Explorer its hints (:func:`explorer_hints`) and a person
+    the lines of :func:`intuitf.intent.readback.read_back`."""
+
+    text: TextHints
+    strokes: list = field(default_factory=list)
+
+
+def read_intent(
     intent: Intent, volume=None, structures: StructureMap | None = None, camera=None
+) -> IntentReading:
+    """The words' hints of ``intent`` on ``volume``, and a sketch's strokes where a ``camera``
+    (its base picture's, a ``Camera`` or its dict) says how they lie on it."""
+    th = intent_hints(intent, volume, structures)
+    strokes = []
+    if intent.kind == "sketch" and intent.sketch is not None and volume is not None and camera:
+        strokes = _stroke_hints(intent, volume, camera)  # rays through every stroke
+    return IntentReading(th, strokes)
+
+
+def explorer_hints(
+    intent: Intent,
+    volume=None,
+    structures: StructureMap | None = None,
+    camera=None,
+    reading: IntentReading | None = None,
 ) -> list[dict]:
     """The hints the Explorer takes for ``intent`` on ``volume`` (empty: none understood).
 
@@ -737,15 +764,15 @@ def explorer_hints(
 
     A sketch, with the ``camera`` its base picture was rendered from (a ``Camera`` or its
     dict), gives a hint per stroke: its colour on the values under it
-    (:func:`intuitf.intent.strokes.stroke_hints`).
+    (:func:`intuitf.intent.strokes.stroke_hints`). ``reading``: the intent already read
+    (:func:`read_intent`), so that nothing is read twice.
     """
-    th = intent_hints(intent, volume, structures)
+    reading = reading or read_intent(intent, volume, structures, camera)
+    th, strokes = reading.text, reading.strokes
     out = [h.to_explorer() for h in th.hints if h.center is not None or intent.kind == "edit"]
     placed = [h for h in th.hints if h.center is not None]
-    if intent.kind == "sketch" and intent.sketch is not None and volume is not None and camera:
-        strokes = _stroke_hints(intent, volume, camera)  # rays through every stroke: once
-        out += [h.to_explorer() for h in strokes]
-        placed = placed + [_with_place(h) for h in strokes]
+    out += [h.to_explorer() for h in strokes]
+    placed = placed + [_with_place(h) for h in strokes]
     if intent.kind != "edit" and volume is not None and not any(h.role == "air" for h in placed):
         counts, _ = volume.histogram()
         layout = _Layout.of(np.asarray(counts, dtype=np.float64), _materials(counts))

@@ -11,29 +11,38 @@ Pure computation on the intent and the volume (no I/O).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from intuitf.evaluator.types import Intent
 
+if TYPE_CHECKING:
+    from intuitf.intent.hints import IntentReading
 
-def read_back(intent: Intent, volume, camera=None, structures=None) -> list[str]:
+
+def read_back(
+    intent: Intent, volume, camera=None, structures=None, reading: IntentReading | None = None
+) -> list[str]:
     """Lines saying how ``intent`` is read on ``volume`` (empty for an intent with nothing to
     read: no words, picture or sketch).
 
     ``camera`` (a ``Camera`` or its dict) is the one a sketch's base picture was rendered
-    from; ``structures`` the volume's structure map when already at hand.
+    from; ``structures`` the volume's structure map when already at hand; ``reading`` the
+    intent already read (:func:`~intuitf.intent.hints.read_intent`), as the Explorer's hints
+    were made from it.
     """
-    from intuitf.intent.hints import _stroke_hints, intent_hints, structure_map_of
+    from intuitf.intent.hints import read_intent, structure_map_of
 
-    lines: list[str] = []
     value_range = tuple(getattr(volume, "value_range", (0.0, 1.0)))
     if intent.kind == "sketch":
         if intent.sketch is None or volume is None or not camera:
             return []
         from intuitf.intent.colours import colour_word
 
-        strokes = _stroke_hints(intent, volume, camera)
-        if not strokes:
+        reading = reading or read_intent(intent, volume, structures, camera)
+        if not reading.strokes:
             return ["no stroke lies on the object: the sketch asks for nothing here"]
-        for h in strokes:
+        lines = []
+        for h in reading.strokes:
             line = (f"{colour_word(h.rgb)} stroke ({h.pixels} px): values around "
                     f"{_raw(h.center, value_range)}")  # fmt: skip
             lines.append("; ".join([line, *h.notes]))
@@ -41,7 +50,8 @@ def read_back(intent: Intent, volume, camera=None, structures=None) -> list[str]
     if intent.kind == "none" or not (intent.text or intent.reference is not None):
         return []
     smap = structures if structures is not None else structure_map_of(volume)
-    th = intent_hints(intent, volume, smap)
+    th = (reading or read_intent(intent, volume, smap, camera)).text
+    lines = []
     for h in th.hints:
         look = ", ".join(x for x in (h.colour, h.opacity) if x) or "shown"
         lines.append(f'"{h.words}": {look}, {_place(h, smap, value_range, intent.kind)}')

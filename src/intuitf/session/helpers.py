@@ -22,15 +22,22 @@ def _palette_hint(intent: Intent, settings: RunSettings) -> list[tuple[float, fl
     return intent_palette(intent, background=(r, g, b))
 
 
-def _read_back(intent: Intent, settings: RunSettings, volume: Volume) -> list[str]:
-    """How the intent is read on the volume, in lines a person can check
-    (:func:`intuitf.intent.readback.read_back`); none when the run does not use them
-    (``material_hints`` off)."""
+def _read_intent(
+    intent: Intent, settings: RunSettings, volume: Volume
+) -> tuple[list[dict], list[str]]:
+    """The Explorer's hints for the intent on the volume and how it was read, in lines a
+    person can check (:func:`intuitf.intent.readback.read_back`), from one reading of it (a
+    sketch's rays cast once); neither when the run does not use them (``material_hints``
+    off)."""
+    if not getattr(settings, "material_hints", True):
+        return [], []
+    from intuitf.intent.hints import explorer_hints, read_intent
     from intuitf.intent.readback import read_back
 
-    if not getattr(settings, "material_hints", True):
-        return []
-    return read_back(intent, volume, camera=settings.camera or None)
+    camera = settings.camera or None
+    reading = read_intent(intent, volume, camera=camera)
+    return (explorer_hints(intent, volume, camera=camera, reading=reading),
+            read_back(intent, volume, camera=camera, reading=reading))  # fmt: skip
 
 
 def _material_hints(intent: Intent, settings: RunSettings, volume: Volume) -> list[dict]:

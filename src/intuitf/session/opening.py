@@ -20,10 +20,9 @@ from intuitf.session.events import EventLog
 from intuitf.session.helpers import (
     _intent_record,
     _judge_name,
-    _material_hints,
     _paid,
     _palette_hint,
-    _read_back,
+    _read_intent,
     _with_selection,
 )
 from intuitf.session.recorder import recorder_for
@@ -170,7 +169,7 @@ def _new(
     # the intent that the first generation's hints are made from match them by name.
     naming = _name_structures(volume, judge, settings)
     counts, _ = volume.histogram()
-    understood = _read_back(intent, settings, volume)
+    hints, understood = _read_intent(intent, settings, volume)
     explorer = make_explorer(
         settings.explorer,
         population=settings.population,
@@ -182,7 +181,7 @@ def _new(
         value_range=volume.value_range,
         initial=list(initial),
         palette=_palette_hint(intent, settings),
-        hints=_material_hints(intent, settings, volume),
+        hints=hints,
     )
     if plan[0][0] == "refine":
         if len(initial) != 1 or not intent.selected:
