@@ -333,6 +333,12 @@ def report_html(c: RunContents) -> str:
     head = f"<h1>intuitf run · {html.escape(c.name)}</h1>"
     if intent_text:
         head += f'<div class="intent">“{html.escape(str(intent_text))}”</div>'
+    # How the intent was read, right under it: what was asked, then what intuitf made of it
+    # (below the Run grid it read as a footnote to the settings).
+    understood = run.get("understood")
+    if isinstance(understood, list) and understood:
+        items = "".join(f"<li>{html.escape(str(line))}</li>" for line in understood)
+        head += f'<h3 class="note">Understood</h3><ul class="understood">{items}</ul>'
 
     key_settings = ["evaluator", "population", "generations", "seed"]
     # Older and newer run records keep the evaluator in settings or as "judge" beside them.
@@ -362,10 +368,6 @@ def report_html(c: RunContents) -> str:
         f"<div><h3 class='note'>Cost</h3>{_table(_costs(c))}</div>",
         "</div>",
     ]
-    understood = run.get("understood")
-    if isinstance(understood, list) and understood:
-        items = "".join(f"<li>{html.escape(str(line))}</li>" for line in understood)
-        parts.append(f'<h3 class="note">Understood</h3><ul class="understood">{items}</ul>')
     warning = _match_stats(c).warning
     if warning:
         parts.append(f'<p class="warn"><strong>Warning:</strong> {html.escape(warning)}</p>')

@@ -58,6 +58,13 @@ def test_a_run_keeps_how_its_words_were_read(tmp_path):
     sess.close()
     record = json.loads((tmp_path / "run" / "run.json").read_text())
     assert record["understood"] == sess.understood
+    # The report says it right under the words, before the run's settings.
+    from intuitf.report import build_report
+
+    page = build_report(tmp_path / "run").read_text()
+    said = page.index("“red bone and a gizmo”")
+    assert said < page.index('<ul class="understood">') < page.index("<h2>Run</h2>")
+    assert "<li>not understood: gizmo</li>" in page
     again = Session.resume(tmp_path / "run", vol)
     assert again.understood == sess.understood
     again.close()

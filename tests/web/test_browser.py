@@ -162,6 +162,29 @@ def test_page_loads_safely_and_previews_the_phantom(page, web_server, browser, s
     assert not [e for e in page.console_errors if "Content Security Policy" in e]
 
 
+#: The bonsai's trunk and soil share one material (their value ranges from its structure map).
+BONSAI_TRUNK_AND_SOIL = [
+    {"id": 7, "name": None, "shape": "branching", "position": "centre", "outer": True,
+     "share": 0.019, "value_range": [0.294, 0.55]},
+    {"id": 8, "name": None, "shape": "plate", "position": "bottom", "outer": False,
+     "share": 0.396, "value_range": [0.335, 0.682]},
+]  # fmt: skip
+
+
+def test_a_feature_is_named_after_the_structure_its_values_fit_best(page, web_server):
+    # A silver Gaussian at 0.39 shows the trunk; the soil (far larger) shares those values.
+    # Named after the largest, the trunk's feature read "plate, bottom".
+    at = page.evaluate(
+        """list => import('/static/features.js').then(F => [0.39, 0.6, 0.9].map(m => ({
+             label: F.structureLabel(m, list),
+             all: F.structuresAt(m, list).map(F.structureName)})))""",
+        BONSAI_TRUNK_AND_SOIL,
+    )
+    assert at[0] == {"label": "branching, centre", "all": ["branching, centre", "plate, bottom"]}
+    assert at[1] == {"label": "plate, bottom", "all": ["plate, bottom"]}
+    assert at[2] == {"label": None, "all": []}
+
+
 def test_case_study_text_query_select_refine_branch_overrule(page, web_server, shots):
     """Load the phantom, say what you want, watch the gallery fill, click a structure, refine
     only it, go back in the history and branch, overrule the judge and undo."""

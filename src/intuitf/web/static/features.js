@@ -99,13 +99,32 @@ async function loadStructures() {
   }
 }
 
-/** The structure a Gaussian at `mean` shows: its name where a model gave one, else what it
- * looks like and where it is ("blob, bottom"). */
-export function structureLabel(mean, list = structures.list) {
-  const hits = (list || []).filter((s) => s.value_range[0] - 0.02 <= mean && mean <= s.value_range[1] + 0.02);
-  if (!hits.length) return null;
-  const s = hits.reduce((a, b) => (b.share > a.share ? b : a));
+/** What a structure is called: its name where a model gave one, else what it looks like and
+ * where it is ("blob, bottom"). */
+export function structureName(s) {
   return s.name || `${s.shape}, ${s.position}`;
+}
+
+/** The structures whose values a Gaussian at `mean` falls on, the best fit first: the one whose
+ * value range has `mean` nearest its middle (relative to the range's half-width), then the
+ * larger. A 1-D transfer function colours all of them alike. Picking the largest only named
+ * the bonsai's trunk feature "plate, bottom", after the soil that shares the trunk's values. */
+export function structuresAt(mean, list = structures.list) {
+  const fit = (s) => {
+    const [lo, hi] = s.value_range;
+    return Math.abs(mean - 0.5 * (lo + hi)) / Math.max(0.5 * (hi - lo), 0.01);
+  };
+  return (list || [])
+    .filter((s) => s.value_range[0] - 0.02 <= mean && mean <= s.value_range[1] + 0.02)
+    .map((s) => ({ s, f: fit(s) }))
+    .sort((a, b) => a.f - b.f || b.s.share - a.s.share)
+    .map((x) => x.s);
+}
+
+/** The name of the structure a Gaussian at `mean` shows best (:func:`structuresAt`), or null. */
+export function structureLabel(mean, list = structures.list) {
+  const hits = structuresAt(mean, list);
+  return hits.length ? structureName(hits[0]) : null;
 }
 
 /** For each Gaussian, the lower-numbered one it nearly repeats (overlapping values, close
@@ -134,14 +153,16 @@ function render(feats) {
   strip.replaceChildren(
     ...feats.map((f) => {
       const g = tf.gaussians[f.index] || {};
-      const what = structureLabel(g.mean ?? 0);
+      const on = structuresAt(g.mean ?? 0);
+      const what = on.length ? structureName(on[0]) : null;
+      const also = on.slice(1).map(structureName);
       const twin = twins[f.index] ?? -1;
       return el(
         `button.feature${twin >= 0 ? ".twin" : ""}`,
         {
           type: "button",
           dataset: { index: String(f.index), structure: what || "", twin: twin >= 0 ? String(twin) : "" },
-          title: `Feature ${f.index + 1}${what ? ` (${what})` : ""}: mean ${(g.mean ?? 0).toFixed(3)}, width ${(g.width ?? 0).toFixed(3)}, height ${(g.height ?? 0).toFixed(2)}${g.frozen ? " (frozen)" : ""}${twin >= 0 ? `; nearly the same as feature ${twin + 1}` : ""}`,
+          title: `Feature ${f.index + 1}${what ? ` (${what})` : ""}${also.length ? `; its values are also those of ${also.join("; ")}` : ""}: mean ${(g.mean ?? 0).toFixed(3)}, width ${(g.width ?? 0).toFixed(3)}, height ${(g.height ?? 0).toFixed(2)}${g.frozen ? " (frozen)" : ""}${twin >= 0 ? `; nearly the same as feature ${twin + 1}` : ""}`,
           "aria-pressed": "false",
           on: { click: () => toggle(f.index) },
         },
@@ -152,6 +173,7 @@ function render(feats) {
           el("span.swatch", { style: { background: rgbToHex(g.color || [0.5, 0.5, 0.5]) } }),
           `${f.index + 1}`,
           what ? el("span.feature-name", { text: what }) : null,
+          also.length ? el("span.feature-also", { text: `+${also.length}` }) : null,
           twin >= 0 ? el("span.feature-twin", { text: `≈${twin + 1}` }) : null,
           el("span.feature-val", { text: `@${(g.mean ?? 0).toFixed(2)}` }),
         ),
