@@ -77,6 +77,27 @@ def test_a_hidden_material_gets_no_opacity_from_any_candidate():
     assert float(GaussianTF((g,)).opacity(s).max()) <= HIDDEN_EPS * 1.01
 
 
+def test_a_faint_gaussian_on_the_air_leaves_no_fog_over_the_box():
+    # A head CT's air under a Gaussian of height 1.5e-3: little per voxel, but summed over a
+    # ray through the whole box it drew the box as a red fog (13 % alpha across 96 voxels).
+    rng = np.random.default_rng(1)
+    data = rng.normal(0.02, 0.005, (96, 96, 96))
+    data[40:56, 40:56, 40:56] = 0.6
+    vol = Volume.from_array(data.clip(0, 1).astype(np.float32), value_range=(0.0, 1.0))
+    hints = as_hints(explorer_hints(Intent(kind="text", text="ivory block"), vol))
+    faint = GaussianTF((Gaussian(0.03, 0.03, 1.5e-3, (0.9, 0.1, 0.1)),
+                        Gaussian(0.6, 0.03, 0.8, (1.0, 1.0, 0.9))))  # fmt: skip
+    quiet = quiet_hidden(faint, hints, Bounds())
+    from intuitf.render import Camera, VolumeRenderer
+
+    r = VolumeRenderer(vol, size=64, shading=False, device="cpu")
+    alpha = r.render_rgba(quiet, Camera(azimuth=30.0, elevation=20.0))[..., 3]
+    block = r.render_rgba(GaussianTF((faint.gaussians[1],)), Camera(azimuth=30.0, elevation=20.0))
+    air = block[..., 3] < 0.01  # rays through air alone
+    assert air.mean() > 0.3
+    assert float(alpha[air].max()) < 0.02
+
+
 @pytest.mark.parametrize("kind", ["none", "sketch", "text"])
 def test_every_first_population_keeps_the_background_clear(kind):
     rng = np.random.default_rng(0)
