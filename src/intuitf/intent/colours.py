@@ -63,13 +63,18 @@ def named_colours(text: str) -> list[str]:
     return found
 
 
-def colour_word(rgb) -> str:
-    """The name of the named colour nearest ``rgb`` (three values in [0, 1]), in CIELAB:
-    how a person would call a stroke's or a reference layer's colour ("red", "light blue")."""
-    import numpy as np
-    from skimage.color import rgb2lab
+#: Colour names that read as a material in words ("bone white" says "bone"): never given as
+#: the name of a colour seen.
+NOT_NAMES = ("bone white",)
 
-    names = list(NAMED_COLOURS)
-    table = np.array([NAMED_COLOURS[n] for n in names], dtype=np.float64) / 255.0
-    labs = rgb2lab(np.vstack([table, np.clip(np.asarray(rgb, np.float64), 0, 1)])[None])[0]
-    return names[int(np.argmin(np.linalg.norm(labs[:-1] - labs[-1], axis=1)))]
+
+def colour_word(rgb) -> str:
+    """The name of the named colour nearest ``rgb`` (three values in [0, 1]) by ΔE2000: how a
+    person would call a stroke's or a reference layer's colour ("red", "light blue")."""
+    import numpy as np
+    from skimage.color import deltaE_ciede2000, rgb2lab
+
+    lab = rgb2lab(np.clip(np.asarray(rgb, np.float64), 0, 1)[None, None])[0, 0]
+    names = [n for n in NAMED_COLOURS if n not in NOT_NAMES]
+    labs = rgb2lab(np.array([[NAMED_COLOURS[n] for n in names]], np.float64) / 255.0)[0]
+    return names[int(np.argmin(deltaE_ciede2000(labs, lab[None])))]

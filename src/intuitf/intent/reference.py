@@ -18,7 +18,7 @@ import numpy as np
 from scipy import ndimage
 from skimage.color import deltaE_ciede2000, rgb2lab
 
-from intuitf.intent.colours import NAMED_COLOURS
+from intuitf.intent.colours import colour_word
 
 RGB = tuple[float, float, float]
 
@@ -33,17 +33,6 @@ _SAME = 12.0
 #: Value (max channel) both colours are scaled to: a shaded picture shows a material darker
 #: than its colour (oblique surfaces get less light), by about as much as the palette's.
 _VALUE = 0.95
-
-
-#: Colour names that read as a material in words ("bone white" says "bone").
-_NOT_NAMES = ("bone white",)
-
-
-def _nearest_name(rgb: np.ndarray) -> str:
-    lab = rgb2lab(np.asarray(rgb, np.float64)[None, None])[0, 0]
-    names = [n for n in NAMED_COLOURS if n not in _NOT_NAMES]
-    labs = rgb2lab(np.array([[NAMED_COLOURS[n] for n in names]], np.float64) / 255.0)[0]
-    return names[int(np.argmin(deltaE_ciede2000(labs, lab[None])))]
 
 
 def outline_and_inside(
@@ -133,6 +122,6 @@ def reference_words(layers: list[tuple[str, RGB, str | None]]) -> str:
     parts = []
     for kind, rgb, look in layers:
         words = [look] if look else []
-        words += [_nearest_name(np.asarray(rgb)), f"{kind} part"]
+        words += [colour_word(np.asarray(rgb)), f"{kind} part"]
         parts.append(" ".join(words))
     return " and ".join(parts)
