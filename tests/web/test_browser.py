@@ -242,6 +242,11 @@ def test_case_study_text_query_select_refine_branch_overrule(page, web_server, s
     page.wait_for_selector(
         f".run-node[data-run='{run}'] .branches .run-node[data-run='{refine_run}']"
     )
+    # The page shows the refined run's best once its results arrive (CI once read the
+    # current candidate before they did and asked for one that was not there: a 404).
+    page.wait_for_function(
+        "run => (window.intuitfDebug.state.current || '').startsWith(run + '/')", arg=refine_run
+    )
     refined = web_server.api("GET", f"/api/candidates/{current(page)}")["tf"]["gaussians"]
     before = web_server.api("GET", f"/api/candidates/{parent_qid}")["tf"]["gaussians"]
     assert len(refined) == len(before)
