@@ -98,6 +98,34 @@ def test_a_faint_gaussian_on_the_air_leaves_no_fog_over_the_box():
     assert float(alpha[air].max()) < 0.02
 
 
+def test_a_tail_reaching_the_air_leaves_no_veil_over_the_body():
+    # The chest CT's air is 0.0 (masked), its background hint 0.002 +- 0.007. A faint red
+    # Gaussian at 0.13 (its fat) kept to 2e-3 at the hint's edge, yet gave 0.0 5e-4 per voxel:
+    # a red veil over the whole box (5 % alpha across 96 voxels of air, 0.5 % now).
+    rng = np.random.default_rng(1)
+    data = np.zeros((96, 96, 96))
+    data[24:72, 24:72, 24:72] = rng.normal(0.13, 0.01, (48, 48, 48))
+    data[40:56, 40:56, 40:56] = 0.6
+    vol = Volume.from_array(data.clip(0, 1).astype(np.float32), value_range=(0.0, 1.0))
+    hints = [Hint("background", center=0.002, spread=0.007, hidden=True)]
+    skin = Gaussian(0.13, 0.041, 0.072, (0.97, 0.16, 0.16))
+    quiet = quiet_hidden(GaussianTF((skin,)), hints, Bounds()).gaussians[0]
+    assert quiet.height == skin.height and quiet.width < skin.width  # narrowed, still there
+    from scipy import ndimage
+
+    from intuitf.render import Camera, VolumeRenderer
+
+    cam = Camera(azimuth=30.0, elevation=20.0)
+    body = Volume.from_array((data > 0).astype(np.float32), value_range=(0.0, 1.0))
+    solid = GaussianTF((Gaussian(1.0, 0.05, 1.0, (1.0, 1.0, 1.0)),))
+    air = VolumeRenderer(body, size=64, shading=False, device="cpu").render_rgba(solid, cam)
+    # Rays through air alone, two pixels off the body's outline (its partial values are fat).
+    air = ndimage.binary_erosion(air[..., 3] < 0.01, iterations=2, border_value=1)
+    r = VolumeRenderer(vol, size=64, shading=False, device="cpu")
+    assert air.mean() > 0.3
+    assert float(r.render_rgba(GaussianTF((quiet,)), cam)[..., 3][air].max()) < 0.02
+
+
 @pytest.mark.parametrize("kind", ["none", "sketch", "text"])
 def test_every_first_population_keeps_the_background_clear(kind):
     rng = np.random.default_rng(0)

@@ -154,6 +154,14 @@ def settle_view(page, timeout: float = 120_000) -> None:
         " && !document.getElementById('view-stage').classList.contains('busy'); }",
         timeout=timeout,
     )
+    # The Features strip renders each feature alone after the view: a screenshot taken
+    # before its tiles load shows "Rendering each feature alone…" instead of them.
+    page.wait_for_function(
+        "() => { const s = document.getElementById('features-strip');"
+        " return !s || (!/Rendering each feature/.test(s.textContent)"
+        " && [...s.querySelectorAll('img')].every(i => i.complete)); }",
+        timeout=timeout,
+    )
     page.wait_for_timeout(800)
 
 
