@@ -281,8 +281,9 @@ def quiet_hidden(tf: GaussianTF, hints: Sequence[Hint], bounds: Bounds) -> Gauss
     ``HIDDEN_REACH`` spreads above. A free Gaussian centred on them is switched off (unless
     its height is below ``HIDDEN_CORE_EPS``); one centred elsewhere that gives their edge more
     than ``HIDDEN_EPS`` of opacity, or their center more than ``HIDDEN_CORE_EPS``, is narrowed
-    until it does not, or switched off when it would have to be narrower than the bounds allow. Over a material as common as air, even a
-    faint Gaussian is a fog over the whole volume box.
+    until it does not, or switched off when it would have to be narrower than the bounds
+    allow. Over a material as common as air, even a faint Gaussian is a fog over the whole
+    volume box.
     """
     from dataclasses import replace
 
