@@ -142,11 +142,10 @@ def labels_for(name: str, d: np.ndarray) -> tuple[np.ndarray, dict[str, int], np
     # there is seen on it), not the lower material their value names: the densest claims
     # them first.
     near_air = ndimage.binary_dilation(lab == 0, iterations=1)
-    order = sorted(ids.values(), key=lambda i: -float(np.median(d[core == i])) if (core == i).any()
-                   else 0.0)  # fmt: skip
-    for i in order:
-        med = float(np.median(d[core == i])) if (core == i).any() else 0.0
-        rim = near_air & (lab > 0) & (lab != i) & (core != i) & (d < med)
+    medians = {i: float(np.median(d[core == i])) if (core == i).any() else 0.0
+               for i in ids.values()}  # fmt: skip
+    for i in sorted(medians, key=lambda i: -medians[i]):
+        rim = near_air & (lab > 0) & (lab != i) & (core != i) & (d < medians[i])
         rim &= ndimage.binary_dilation(core == i, iterations=1)
         lab[rim] = i
     return lab, ids, core
