@@ -71,3 +71,34 @@ def test_a_run_keeps_how_its_words_were_read(tmp_path):
     # Without material hints the words are not read onto the volume: nothing to say.
     off = RunSettings(population=4, generations=1, image_size=32, seed=0, material_hints=False)
     assert Session.create(vol, intent=intent, settings=off).understood == []
+
+
+def test_new_words_in_the_middle_of_a_run_are_read_again(tmp_path):
+    from intuitf.session.store import RunStore
+
+    vol = phantom(32)
+    settings = RunSettings(population=4, generations=3, image_size=32, output_size=32, seed=0)
+    sess = Session.create(
+        vol,
+        intent=Intent(kind="text", text="red bone"),
+        settings=settings,
+        run_dir=tmp_path / "run",
+    )
+    sess.step()
+    sess.query(Intent(kind="text", text="blue skin and a widget"), generations=1)
+    # The lines describe the words now asked, not the first ones.
+    assert sess.understood[0].startswith('"skin": blue')
+    assert sess.understood[-1] == "not understood: widget"
+    assert not any(line.startswith('"bone"') for line in sess.understood)
+    # The Explorer's hints are the new words' too.
+    assert [h.name for h in sess.explorer.hints] == ["skin"]
+    sess.step()
+    sess.close()
+    journal = [json.loads(x) for x in (tmp_path / "run" / "journal.jsonl").read_text().splitlines()]
+    asked = next(e for e in journal if e["type"] == "query")
+    assert asked["understood"] == sess.understood
+    # What the web app and the MCP tools list, and a resumed run, say the same.
+    assert RunStore(tmp_path).run("run").understood == sess.understood
+    again = Session.resume(tmp_path / "run", vol)
+    assert again.understood == sess.understood
+    again.close()

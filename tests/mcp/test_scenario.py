@@ -157,6 +157,8 @@ async def scenario(client: Client, folders, model_url: str) -> dict:
     q = await call(client, "new_query", run=br["run"], intent="only the bones, white",
                    generations=1)  # fmt: skip
     assert q["applied"] is True
+    # How the new words were read, said when they are applied.
+    assert q["understood"][0].startswith('"bones": '), q
     await wait_run_end(client, br["run"])
     runs = (await call(client, "list_runs"))["runs"]
     parents = {r["name"]: (r["parent"] or {}).get("run") for r in runs}

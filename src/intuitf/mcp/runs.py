@@ -623,7 +623,8 @@ class RunDesk:
                 deferred = await live.call(
                     lambda: (s.at_boundary(lambda: s.query(new_intent, gens)), s.has_deferred())[1]
                 )
-                return _reply({"run": name, "status": "running", "applied": not deferred,
+                said = {} if deferred else {"understood": list(s.understood)}
+                return _reply({"run": name, "status": "running", "applied": not deferred, **said,
                                "note": "starts after the generation in progress" if deferred else ""})  # fmt: skip
             except NotLive:
                 pass
@@ -635,7 +636,8 @@ class RunDesk:
             await session.aclose()
             raise
         await self._start(session)
-        return _reply({"run": name, "status": "running", "applied": True})
+        return _reply({"run": name, "status": "running", "applied": True,
+                       "understood": list(session.understood)})  # fmt: skip
 
     async def branch(self, name, generation, candidate, changes) -> Reply:
         self.check_run(name)

@@ -531,7 +531,8 @@ def register(server: MCPServer, svc: McpService, results: Results) -> None:
         ] = None,
     ) -> CallToolResult:
         """Ask a run something new (words, a reference or a sketch): a new customize stage
-        starts after the generation in progress, keeping the run's history."""  # fmt: skip
+        starts after the generation in progress, keeping the run's history. Once applied,
+        the reply says how the new words were read on the volume (``understood``)."""  # fmt: skip
         return await answer(lambda: desk.query(run, intent, generations))
 
     @server.tool(annotations=WRITE)

@@ -40,15 +40,6 @@ def _read_intent(
             read_back(intent, volume, camera=camera, reading=reading))  # fmt: skip
 
 
-def _material_hints(intent: Intent, settings: RunSettings, volume: Volume) -> list[dict]:
-    """The materials the intent's words name, placed on the volume (see ``RunSettings``)."""
-    if not getattr(settings, "material_hints", True):
-        return []
-    from intuitf.intent.hints import explorer_hints
-
-    return explorer_hints(intent, volume, camera=settings.camera or None)
-
-
 def _with_selection(
     intent: Intent, volume: Volume, initial: Sequence[GaussianTF], settings: RunSettings
 ) -> Intent:

@@ -342,7 +342,12 @@ def resume_session(
         else:
             sess = _from_checkpoint(cls, vol, intent, judge, settings, rd, ckpt, spec, lock)
         sess.judge_moved = moved
-        sess.understood = [str(x) for x in record.get("understood") or []]
+        # How the words now asked were read: a later query's lines (in the checkpoint), else
+        # the opening's.
+        said = (ckpt or {}).get("understood")
+        sess.understood = [
+            str(x) for x in (said if said is not None else record.get("understood") or [])
+        ]
         if moved:
             sess.recorder.journal(
                 {"type": "judge", "generation": generation, "judge": _judge_name(judge)}

@@ -55,9 +55,9 @@ from intuitf.session.events import EventLog
 from intuitf.session.helpers import (
     _intent_record,
     _judge_name,
-    _material_hints,
     _paid,
     _palette_hint,
+    _read_intent,
 )
 from intuitf.session.human import HumanVerdict
 from intuitf.session.human_loop import HumanVerdicts
@@ -769,12 +769,15 @@ class Session:
                 from intuitf.explorer.base import _palette
 
                 self.explorer.palette = _palette(palette)
-            if hasattr(self.explorer, "hints"):  # the new words name their own materials
+            # The new words name their own materials, and the person is told how they were
+            # read, as at the opening.
+            hints, self.understood = _read_intent(intent, self.settings, self.volume)
+            if hasattr(self.explorer, "hints"):
                 from intuitf.explorer.hints import as_hints
 
-                self.explorer.hints = as_hints(_material_hints(intent, self.settings, self.volume))
+                self.explorer.hints = as_hints(hints)
             self.explorer.set_stage("customize", generations=n)
-            record = {"type": "query", "generation": self.generation, "intent": _intent_record(intent), "pictures": pictures}  # fmt: skip
+            record = {"type": "query", "generation": self.generation, "intent": _intent_record(intent), "pictures": pictures, "understood": self.understood}  # fmt: skip
             self._journal(record)
             self._journal({"type": "stage", "generation": self.generation, "stage": "customize"})
             self._current_intent_record = {**_intent_record(intent), "pictures": pictures}
@@ -1181,6 +1184,7 @@ class Session:
             "plan": [list(p) for p in self.plan],
             **self._verdicts.state(),
             "queries": self.queries,
+            "understood": self.understood,
         }
         if self._current_intent_record is not None:
             state["intent"] = self._current_intent_record

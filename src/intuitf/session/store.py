@@ -135,6 +135,8 @@ class RunStore:
         plan = record.get("plan") or []
         ended = None
         generations_done = 0
+        # How the words now asked were read: the opening's, or the last query's.
+        understood = [str(x) for x in record.get("understood") or []]
         for e in rd.iter_journal():
             if e.get("type") == "end":
                 ended = e
@@ -143,6 +145,8 @@ class RunStore:
                 ended = None if ended and ended.get("generation", 0) <= e["generation"] else ended
             elif e.get("type") == "query":
                 ended = None
+                if isinstance(e.get("understood"), list):
+                    understood = [str(x) for x in e["understood"]]
         ckpt = _read_json(rd.checkpoint) or {}
         if ckpt.get("plan"):
             plan = ckpt["plan"]
@@ -170,7 +174,7 @@ class RunStore:
             judge=str(record.get("judge", "")),
             parent=parent,
             message=str((ended or {}).get("message", "")),
-            understood=[str(x) for x in record.get("understood") or []],
+            understood=understood,
         )
 
     # -- the tree -------------------------------------------------------------------------
