@@ -123,7 +123,8 @@ _ON_HUE = 10.0
 _ABSENT_DELTA_E = 260.0
 #: Share of the foreground at which a named colour counts as fully present.
 _NAMED_SATURATION = 0.05
-#: Share of the foreground at which a colour a clause names counts as fully shown.
+#: Share of the foreground at which a solid (or unqualified) colour a clause names counts as
+#: fully shown.
 _CLAUSE_SATURATION = 0.2
 #: The share of the foreground at which a faint or translucent colour scores in full. Such a
 #: layer lies in front of the rest and tints most of the object's silhouette (the parts seen
