@@ -175,9 +175,10 @@ def test_a_feature_is_named_after_the_structure_its_values_fit_best(page, web_se
     # A silver Gaussian at 0.39 shows the trunk; the soil (far larger) shares those values.
     # Named after the largest, the trunk's feature read "plate, bottom".
     at = page.evaluate(
-        """list => import('/static/features.js').then(F => [0.39, 0.6, 0.9].map(m => ({
-             label: F.structureLabel(m, list),
-             all: F.structuresAt(m, list).map(F.structureName)})))""",
+        """list => import('/static/features.js').then(F => [0.39, 0.6, 0.9].map(m => {
+             const all = F.structuresAt(m, list).map(F.structureName);
+             return {label: all[0] ?? null, all};  // the tile's name: the best fit's
+           }))""",
         BONSAI_TRUNK_AND_SOIL,
     )
     assert at[0] == {"label": "branching, centre", "all": ["branching, centre", "plate, bottom"]}

@@ -121,12 +121,6 @@ export function structuresAt(mean, list = structures.list) {
     .map((x) => x.s);
 }
 
-/** The name of the structure a Gaussian at `mean` shows best (:func:`structuresAt`), or null. */
-export function structureLabel(mean, list = structures.list) {
-  const hits = structuresAt(mean, list);
-  return hits.length ? structureName(hits[0]) : null;
-}
-
 /** For each Gaussian, the lower-numbered one it nearly repeats (overlapping values, close
  * colours), or -1: such twins show the same structure twice. */
 export function nearTwins(gaussians) {
