@@ -186,6 +186,27 @@ def test_sketch_prefers_stroke_colours_and_preservation():
     assert j.score(good, "stroke_color_agreement", intent) > -15.0  # mean ΔE under strokes
 
 
+def test_sketch_shaded_stroke_colours_beat_one_bright_colour_for_both():
+    """Red on the top, yellow below: a picture that shows both in their colours but shaded
+    dark by the headlight meets the sketch; one that paints both bright yellow does not.
+    (Measured plainly, dark red lay farther from the red stroke than yellow did, and a search
+    on the tooth traded its red crown for yellow.)"""
+    j = MetricJudge()
+    top, low = disk(0.15, 0.5, 0.3), disk(0.15, 0.5, 0.7)
+    base = paint(paint(canvas(), top, (200, 200, 200)), low, (200, 200, 200))
+    sketch = np.zeros((S, S, 4), np.uint8)
+    sketch[disk(0.08, 0.5, 0.3)] = (220, 30, 30, 255)
+    sketch[disk(0.08, 0.5, 0.7)] = (240, 220, 40, 255)
+    intent = Intent(kind="sketch", sketch=sketch, base=base)
+    shaded = paint(paint(canvas(), top, (80, 10, 10)), low, (150, 110, 20))
+    all_yellow = paint(paint(canvas(), top, (240, 220, 40)), low, (240, 220, 40))
+    agree = [aspect("stroke_color_agreement")]
+    assert cmp(j, all_yellow, shaded, agree, intent).overall is Choice.SECOND
+    # Dark is not taken for any colour: grey where red was asked still misses.
+    grey = paint(paint(canvas(), top, (80, 80, 80)), low, (150, 110, 20))
+    assert cmp(j, grey, shaded, agree, intent).overall is Choice.SECOND
+
+
 def test_sketch_a_hidden_stroked_structure_is_worse_than_a_wrong_colour():
     """Two strokes on two structures: a picture that hides the blue-stroked one loses to one
     that shows it in the other stroke's colour (black is nearer blue than yellow is, so a

@@ -8,7 +8,7 @@ from scipy import ndimage
 from intuitf.evaluator.metric import MetricJudge
 from intuitf.evaluator.types import Intent
 from intuitf.intent.hints import explorer_hints
-from intuitf.intent.strokes import SEE_THROUGH, VISIBLE, stroke_hints, strokes_of
+from intuitf.intent.strokes import SEE_THROUGH, SEEN_BEHIND, VISIBLE, stroke_hints, strokes_of
 from intuitf.render import Camera, VolumeRenderer
 from intuitf.tf import Gaussian, GaussianTF
 from intuitf.volume import Volume
@@ -122,9 +122,10 @@ def test_two_strokes_on_one_material_go_to_it_and_to_the_material_behind_the_thi
     # Both strokes lie on 0.9: red keeps it, yellow means what its thin skin covers.
     assert abs(red.center - 0.9) < 0.03
     assert abs(yellow.center - 0.6) < 0.03
-    # The cap stays red where thick and lets the yellow through where thin: translucent.
-    assert red.height == SEE_THROUGH and yellow.height == VISIBLE
-    assert SEE_THROUGH[1] < VISIBLE[1]
+    # The cap stays red where thick and lets the yellow through where thin: translucent; the
+    # yellow core is strong, as what shows of it is what the cap lets through.
+    assert red.height == SEE_THROUGH and yellow.height == SEEN_BEHIND
+    assert SEE_THROUGH[1] < VISIBLE[1] and SEEN_BEHIND[0] > SEE_THROUGH[1]
     # What became of each stroke is said in words a person can check.
     assert any("same material as the red stroke" in n for n in yellow.notes)
     assert any("translucent" in n and "yellow" in n for n in red.notes)

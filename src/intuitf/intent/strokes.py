@@ -44,6 +44,10 @@ BEHIND_SHARE = 0.5
 #: looks through its thin parts (a thick part, many samples deep, still shows opaque).
 VISIBLE = (0.05, 0.8)
 SEE_THROUGH = (0.03, 0.25)
+#: Gaussian heights of the material seen through a translucent one: strong, since what shows
+#: of it is what the layer in front lets through (at the visible range's low half, the
+#: tooth's yellow dentin stayed hidden under the red enamel in most first generations).
+SEEN_BEHIND = (0.3, 1.0)
 
 
 @dataclass(frozen=True)
@@ -212,6 +216,7 @@ def stroke_hints(
             if mover.behind_share >= BEHIND_SHARE and mover.behind.size >= 3:
                 mover.center, mover.spread = _centre(mover.behind)
                 mover.behind_share = 0.0  # moved once
+                mover.height = SEEN_BEHIND
                 # Its colour shows only where the material on top is thin and translucent.
                 stays.height = SEE_THROUGH
                 mover.notes.append(
