@@ -45,8 +45,9 @@ BEHIND_SHARE = 0.5
 VISIBLE = (0.05, 0.8)
 SEE_THROUGH = (0.03, 0.25)
 #: Gaussian heights of the material seen through a translucent one: strong, since what shows
-#: of it is what the layer in front lets through (at the visible range's low half, the
-#: tooth's yellow dentin stayed hidden under the red enamel in most first generations).
+#: of it is what the layer in front lets through. (Drawn from the visible range, the tooth's
+#: yellow dentin was mostly too faint to show through the red enamel, and searches seldom
+#: found the strong dentin the sketch needs.)
 SEEN_BEHIND = (0.3, 1.0)
 
 
@@ -188,7 +189,8 @@ def stroke_hints(
     ``BEHIND_SHARE`` of its pixels (the dentin under the enamel's thin edge) is taken to mean
     that material ("red crown, yellow dentin", as the paper reads that sketch); the other
     keeps the surface, translucent (``SEE_THROUGH``): opaque where it is thick, seen through
-    where it is thin, so that both colours show where they were drawn. Strokes whose values
+    where it is thin, so that both colours show where they were drawn; the material behind
+    starts strong (``SEEN_BEHIND``), as what shows of it is what the surface lets through. Strokes whose values
     still overlap are pulled apart at the midpoint between their medians.
     """
     sk = np.asarray(sketch)
