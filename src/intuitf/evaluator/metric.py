@@ -510,11 +510,11 @@ class MetricJudge:
         is nearer blue than yellow is, and a blue stroke on a root that shares its values
         with a yellow-stroked crown was met by making the root vanish.)
         """
-        mask, stroke_lab = _strokes(intent, f.lab.shape[:2])
+        mask, stroke_rgb = _strokes(intent, f.lab.shape[:2])
         if mask is None or not mask.any():
             return None
         de = np.zeros(f.lab.shape[:2], np.float32)
-        de[mask] = _stroke_delta_e(f, intent, mask)
+        de[mask] = _stroke_delta_e(f, mask, stroke_rgb[mask])
         if intent.base is not None:
             shown = _resize_mask(self.features(intent.base).fg, f.lab.shape[:2])
             de = np.where(shown & ~f.fg, _ABSENT_DELTA_E, de)
@@ -684,10 +684,11 @@ def _shaded_presence(f: _Features, name: str) -> float:
     return _saturating(share, _CLAUSE_SATURATION) * _lightness_match(bright, float(asked.max()))
 
 
-def _brightened_lab(rgb: np.ndarray, peak: np.ndarray, level: float) -> np.ndarray:
+def _brightened_lab(rgb: np.ndarray, peak: np.ndarray, level: float | np.ndarray) -> np.ndarray:
     """CIELAB of pixels ``rgb`` (N, 3, in [0, 1]) each brightened so that its max channel
-    (``peak``, N) is ``level``: their colour without the headlight's darkening."""
-    return rgb2lab((rgb * (level / peak[:, None]))[None])[0]
+    (``peak``, N) is ``level`` (one value, or one per pixel): their colour without the
+    headlight's darkening."""
+    return rgb2lab((rgb * (level / peak)[:, None])[None])[0]
 
 
 #: How fast a solid colour's match falls as the brightest pixels showing it stay darker (or
@@ -877,18 +878,19 @@ def _colour_closeness(pix: np.ndarray, name: str) -> float:
 
 
 def _strokes(intent: Intent, shape: tuple[int, int]) -> tuple[np.ndarray | None, np.ndarray]:
-    """Stroke mask (alpha > 0) and stroke colours in Lab, resized to ``shape``."""
+    """Stroke mask (alpha > 0) and stroke colours (RGB in [0, 1]), resized to ``shape``."""
     sk = intent.sketch
     if sk is None or sk.ndim != 3 or sk.shape[2] != 4:
         return None, np.zeros(shape + (3,), np.float32)
     alpha = _resize_like(sk[..., 3], shape, order=0) > 0
     rgb = _resize_like(sk[..., :3], shape, order=0).astype(np.float32) / 255.0
-    return alpha, rgb2lab(rgb).astype(np.float32)
+    return alpha, rgb
 
 
-def _stroke_delta_e(f: _Features, intent: Intent, mask: np.ndarray) -> np.ndarray:
-    """CIE76 ΔE between each stroke pixel (``mask``) of the picture and its stroke's colour,
-    the pixel brightened first to the stroke colour's value (max channel).
+def _stroke_delta_e(f: _Features, mask: np.ndarray, asked: np.ndarray) -> np.ndarray:
+    """CIE76 ΔE between each stroke pixel (``mask``) of the picture and its stroke's colour
+    (``asked``, N x 3 RGB in [0, 1]), the pixel brightened first to that colour's value (max
+    channel).
 
     Brightened, because a stroke asks for a colour, not for the headlight's shading of it: a
     red crown shows dark red where it turns away, and measured plainly that dark red was
@@ -896,17 +898,15 @@ def _stroke_delta_e(f: _Features, intent: Intent, mask: np.ndarray) -> np.ndarra
     for more yellow. A pixel too dark to have a colour (max channel under 0.05) keeps its
     plain ΔE.
     """
-    rgb = _resize_like(np.asarray(intent.sketch)[..., :3], f.lab.shape[:2], order=0)
-    asked = rgb[mask].astype(np.float32) / 255.0
     asked_lab = rgb2lab(asked[None])[0]
-    if f.rgb is None:
-        return np.linalg.norm(f.lab[mask] - asked_lab, axis=1)
-    pix = f.rgb[mask].astype(np.float32) / 255.0
-    peak = pix.max(axis=1)
-    level = np.maximum(asked.max(axis=1), 1e-3)
-    lit = peak >= 0.05
-    seen = f.lab[mask].copy()
-    seen[lit] = rgb2lab((pix[lit] * (level[lit] / peak[lit])[:, None])[None])[0]
+    seen = f.lab[mask]
+    if f.rgb is not None:
+        pix = f.rgb[mask].astype(np.float32) / 255.0
+        peak = pix.max(axis=1)
+        lit = peak >= 0.05
+        level = np.maximum(asked.max(axis=1), 1e-3)
+        seen = seen.copy()
+        seen[lit] = _brightened_lab(pix[lit], peak[lit], level[lit])
     return np.linalg.norm(seen - asked_lab, axis=1)
 
 
