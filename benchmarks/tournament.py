@@ -11,16 +11,22 @@ Protocols:
 
 - ``authors``: ratings reset every generation, ``floor(log2 n) + 2`` = 7 rounds (175 pairs at
   n = 50), every pair asked in both orders (``swap="always"``), no verdict cache.
-- ``efficient``: ``SwissTournament(protocol="efficient")`` (Bradley-Terry ranking and pairing,
-  surprising verdicts re-asked in the other order), ``MLLMJudge(swap="never")`` (one call per
-  pair, orientation drawn by the tournament), a verdict cache, and the survivors' ratings passed
-  as ``prior`` (they seed the first round's pairing).
-- ``paper+auto`` (only with ``--variants``): the authors' schedule with single-call judging, to
-  separate the effect of swap debiasing from the effect of priors and the Bradley-Terry fit.
+- ``efficient``: as a Session runs it: ``SwissTournament(protocol="efficient")`` (Bradley-Terry
+  ranking and pairing, surprising verdicts re-asked in the other order),
+  ``MLLMJudge(swap="never")`` (one call per pair, orientation drawn by the tournament), a
+  verdict cache, the survivors' ratings passed as ``prior`` (they seed the first round's
+  pairing) and the earlier generations' verdicts as ``history``, faded by ``HISTORY_FADE`` per
+  generation of age.
+- only with ``--variants``: ``paper+auto``, the authors' schedule with single-call judging (to
+  separate the effect of swap debiasing from the effect of priors and the Bradley-Terry fit);
+  ``eff-full``, the efficient protocol with the history at full weight; ``eff-nohist``, without
+  history.
 
 Printed per protocol: paid model calls per generation, cache hits, wall time per tournament,
-its ratio to ``rounds × latency``, and Kendall's τ of the final ratings against the oracle's
-true order (scipy.stats.kendalltau), averaged over generations and repeats.
+its ratio to ``rounds × latency``, Kendall's τ of the final ratings against the oracle's true
+order (scipy.stats.kendalltau), the share of the true top ten among the ranking's top ten, and
+``best``: the share of generations whose first-ranked image is the truly best one (the pick a
+run shows as its best), averaged over generations and repeats.
 
 Usage: ``python benchmarks/tournament.py`` (latency 2 s and 0.5 s, about 5 minutes) or
 ``--quick`` (latency 0.5 s only, about a minute). Also prints the MetricJudge's time per
@@ -50,6 +56,7 @@ from scipy.stats import kendalltau
 from intuitf.evaluator.cache import VerdictCache
 from intuitf.evaluator.metric import MetricJudge
 from intuitf.evaluator.mllm import MLLMJudge
+from intuitf.evaluator.ratings import HISTORY_FADE
 from intuitf.evaluator.tournament import SwissTournament
 from intuitf.evaluator.types import Intent
 from intuitf.intent.aspects import aspects_for
@@ -113,6 +120,7 @@ class Tally:
     rounds: list[int] = field(default_factory=list)
     tau: list[float] = field(default_factory=list)
     top_hit: list[float] = field(default_factory=list)
+    best_hit: list[float] = field(default_factory=list)
 
 
 async def run_protocol(
@@ -126,7 +134,7 @@ async def run_protocol(
     elif name == "paper+auto":
         judge = MLLMJudge(base_url=base_url, swap="auto", max_concurrency=64, max_retries=2)
         protocol, rounds, cache = "paper", int(math.floor(math.log2(POP))) + 2, None
-    else:
+    else:  # efficient, eff-full, eff-nohist
         cache = VerdictCache(":memory:")
         judge = MLLMJudge(
             base_url=base_url, swap="never", max_concurrency=64, max_retries=2, cache=cache
@@ -135,11 +143,17 @@ async def run_protocol(
     pop = Population(target, seed)
     cands = pop.initial()
     prior: dict[str, float] | None = None
+    fade = {"efficient": HISTORY_FADE, "eff-full": 1.0}.get(name)
+    played: list[tuple[str, str, float, int]] = []  # (first, second, score, generation)
     tally = Tally()
     for gen in range(generations):
         t = SwissTournament(judge, aspects, Intent(), seed=seed * 100 + gen, protocol=protocol,
                             rounds=rounds)  # fmt: skip
-        res = await t.run([c.image for c in cands], [c.cid for c in cands], prior=prior)
+        history = [(a, b, sc, fade ** (gen - g)) for a, b, sc, g in played] if fade else []
+        res = await t.run(
+            [c.image for c in cands], [c.cid for c in cands], prior=prior, history=history
+        )
+        played += [(m.first, m.second, float(m.verdict.p_first), gen) for m in res.matches]
         truth = {c.cid: oracle(c.image) for c in cands}
         tally.calls.append(res.cost.calls)
         tally.cached.append(res.cost.cached_calls)
@@ -150,13 +164,16 @@ async def run_protocol(
         tally.tau.append(
             kendalltau([res.ratings[i] for i in ids], [truth[i] for i in ids]).statistic
         )
-        true_top = set(sorted(ids, key=lambda i: -truth[i])[:SURVIVE])
-        tally.top_hit.append(len(true_top & set(res.ranking[:SURVIVE])) / SURVIVE)
+        true_order = sorted(ids, key=lambda i: -truth[i])
+        tally.top_hit.append(len(set(true_order[:SURVIVE]) & set(res.ranking[:SURVIVE])) / SURVIVE)
+        tally.best_hit.append(float(res.ranking[0] == true_order[0]))
         by_id = {c.cid: c for c in cands}
         survivors = [by_id[i] for i in res.ranking[:SURVIVE]]
         prior = (
             {i: res.ratings[i] for i in res.ranking[:SURVIVE]} if protocol == "efficient" else None
         )
+        if protocol != "efficient":
+            played.clear()
         cands = pop.next(survivors)
     await judge.aclose()
     return tally
@@ -228,7 +245,9 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="latency 0.5 s only")
     ap.add_argument("--generations", type=int, default=4)
     ap.add_argument("--repeats", type=int, default=None, help="seeds per setting")
-    ap.add_argument("--variants", action="store_true", help="also run paper+auto")
+    ap.add_argument(
+        "--variants", action="store_true", help="also run paper+auto, eff-full, eff-nohist"
+    )
     ap.add_argument(
         "--server-process",
         action="store_true",
@@ -237,7 +256,8 @@ def main() -> None:
     )
     args = ap.parse_args()
     latencies = [0.5] if args.quick else [2.0, 0.5]
-    protocols = ["authors", "efficient"] + (["paper+auto"] if args.variants else [])
+    variants = ["paper+auto", "eff-full", "eff-nohist"]
+    protocols = ["authors", "efficient"] + (variants if args.variants else [])
 
     cold, warm = metric_timing()
     print(f"MetricJudge at 256x256: {cold:.1f} ms per comparison of new images, "
@@ -245,7 +265,8 @@ def main() -> None:
     print(f"population {POP}, survivors {SURVIVE}, {args.generations} generations, "
           "noise 10 %, position bias 20 %")  # fmt: skip
     header = (f"{'latency':>7} {'protocol':<11} {'calls/gen':>9} {'cached/gen':>10} "
-              f"{'rounds':>6} {'wall s':>7} {'wall/(r*lat)':>12} {'tau':>6} {'top10':>6}")  # fmt: skip
+              f"{'rounds':>6} {'wall s':>7} {'wall/(r*lat)':>12} {'tau':>6} {'top10':>6} "
+              f"{'best':>5}")  # fmt: skip
     rng = np.random.default_rng(12345)
     target = smooth_image(rng)
     oracle = TargetOracle(target)
@@ -282,7 +303,7 @@ def main() -> None:
         print(
             f"{latency:>7.1f} {proto:<11} {np.mean(agg.calls):>9.1f} {np.mean(agg.cached):>10.1f} "
             f"{np.mean(agg.rounds):>6.1f} {np.mean(agg.wall):>7.2f} {np.mean(agg.ratio):>12.2f} "
-            f"{np.mean(agg.tau):>6.3f} {np.mean(agg.top_hit):>6.2f}"
+            f"{np.mean(agg.tau):>6.3f} {np.mean(agg.top_hit):>6.2f} {np.mean(agg.best_hit):>5.2f}"
         )
     for latency, proto, agg in rows:
         if proto != "authors" and latency in base:

@@ -12,6 +12,7 @@ import pytest
 from scipy.stats import kendalltau
 
 from intuitf.errors import BudgetExhausted
+from intuitf.evaluator.ratings import HISTORY_FADE, faded
 from intuitf.evaluator.tournament import (
     SwissTournament,
     TournamentResult,
@@ -208,6 +209,34 @@ def test_bradley_terry_recovers_strengths():
     fit = bradley_terry(12, games, np.full(12, 1600.0), 0.01)
     assert kendalltau(fit, true).statistic > 0.9
     assert np.ptp(fit) == pytest.approx(400, rel=0.2)
+
+
+def test_a_weighted_game_counts_as_that_many_games():
+    anchors = np.full(3, 1600.0)
+    games = [(0, 1, 1.0), (1, 2, 1.0), (2, 0, 0.5), (0, 2, 1.0)]
+    twice = bradley_terry(3, games + games[:2], anchors, 3.0)
+    weighted = bradley_terry(3, [(0, 1, 1.0, 2.0), (1, 2, 1.0, 2.0), *games[2:]], anchors, 3.0)
+    assert weighted == pytest.approx(twice, abs=1e-6)
+    # Weight zero: as if the game was never played.
+    none = bradley_terry(3, [*games[2:], (1, 0, 1.0, 0.0)], anchors, 3.0)
+    assert none == pytest.approx(bradley_terry(3, games[2:], anchors, 3.0), abs=1e-6)
+
+
+def test_faded_history_lets_a_newcomer_that_beat_the_early_winner_rank_first():
+    # The early winner q50 beat five weak players in each of the four generations before;
+    # the newcomer q60 beats it, and everyone else, in this one.
+    qs = [20, 30, 50, 60]
+    played = [("q50", f"old{g}-{k}", 1.0, g) for g in range(4) for k in range(5)]
+    t = SwissTournament(OracleJudge(), ASPECTS, seed=0, rounds=3)
+    res = run(t, qs, history=faded(played, 4))
+    assert frozenset(("q50", "q60")) in {frozenset((m.first, m.second)) for m in res.matches}
+    assert res.ranking[0] == "q60"
+    # At full weight the old wins outrank the head-to-head loss: the pick sticks.
+    assert run(t, qs, history=[g[:3] for g in played]).ranking[0] == "q50"
+    # A generation's own verdicts count once, each one before by HISTORY_FADE less.
+    assert [w for *_, w in faded(played[::5], 4)] == pytest.approx(
+        [HISTORY_FADE**4, HISTORY_FADE**3, HISTORY_FADE**2, HISTORY_FADE]
+    )
 
 
 class FailingJudge(OracleJudge):

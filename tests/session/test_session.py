@@ -197,11 +197,31 @@ def test_verdicts_of_the_stage_carry_over_and_reset_with_the_stage(vol, tmp_path
     n = len(rec.candidates)
     assert len(s.stage_games) == default_rounds(n) * (n // 2)  # every verdict of the stage
     assert {g[0] for g in s.stage_games} <= {c["id"] for c in rec.candidates}
+    assert {g[3] for g in s.stage_games} == {rec.generation}  # when each was played
     ckpt = json.loads((tmp_path / "r" / "checkpoint.json").read_text())
     assert [tuple(g) for g in ckpt["stage_games"]] == [tuple(g) for g in s.stage_games]
     s.step()  # the next tournament fits them with its own verdicts: the list grows
     assert len(s.stage_games) > len(ckpt["stage_games"])
     s.close()
+
+
+def test_a_checkpoint_whose_verdicts_lack_their_generation_resumes(vol, tmp_path):
+    # Checkpoints written before verdicts faded with age hold (first, second, score).
+    s = Session.create(
+        vol, intent=_intent(), settings=RunSettings(**SETTINGS), run_dir=tmp_path / "r"
+    )
+    s.step()
+    s.step()
+    s.close()
+    path = tmp_path / "r" / "checkpoint.json"
+    ckpt = json.loads(path.read_text())
+    ckpt["stage_games"] = [g[:3] for g in ckpt["stage_games"]]
+    path.write_text(json.dumps(ckpt))
+    resumed = Session.resume(tmp_path / "r", vol, s.judge)
+    # ... read as verdicts of the generation before the one to play
+    assert {g[3] for g in resumed.stage_games} == {resumed.generation - 1}
+    assert resumed.step().generation == 2
+    resumed.close()
 
 
 @pytest.mark.parametrize("method", ["ga", "paper-ga", "cmaes", "random"])

@@ -7,6 +7,21 @@ from collections.abc import Sequence
 
 import numpy as np
 
+#: Weight of a verdict from the tournament before, relative to this tournament's own; one
+#: from k tournaments ago weighs ``HISTORY_FADE ** k``. Survivors carry their record, but a
+#: candidate that beat weak fields for generations cannot outrank, on old wins, a newcomer
+#: that beat it: with full weight (1.0) the best pick stayed on an early winner that later
+#: candidates beat head to head (``benchmarks/tournament.py`` measures the pick).
+HISTORY_FADE = 0.35
+
+
+def faded(
+    games: Sequence[tuple[str, str, float, int]], generation: int
+) -> list[tuple[str, str, float, float]]:
+    """Verdicts ``(first, second, score, generation played)`` weighted for the fit of
+    ``generation``: its own count once, each generation before by :data:`HISTORY_FADE` less."""
+    return [(a, b, s, HISTORY_FADE ** max(0, generation - g)) for a, b, s, g in games]
+
 
 def default_rounds(n: int) -> int:
     """``ceil(log2 n) + 2``, capped so that no pair has to meet twice (0 for n < 2)."""
@@ -23,7 +38,7 @@ def elo_expected(r_a: float, r_b: float) -> float:
 
 def bradley_terry(
     n: int,
-    games: Sequence[tuple[int, int, float]],
+    games: Sequence[tuple[int, int, float] | tuple[int, int, float, float]],
     anchors: np.ndarray,
     anchor_weight: float | np.ndarray = 1.0,
     iterations: int = 1000,
@@ -31,6 +46,8 @@ def bradley_terry(
 ) -> np.ndarray:
     """Bradley-Terry ratings (Elo scale) from ``(i, j, score_of_i)`` games among ``n`` players.
 
+    A game may carry a fourth element, its weight: it counts as that many games (earlier
+    tournaments' verdicts fade this way, see :data:`HISTORY_FADE`); without one it counts once.
     Each player also plays ``anchor_weight`` (a number, or one per player) virtual drawn games
     against a fixed opponent rated ``anchors[i]``; this keeps undefeated or winless players
     finite and pulls players with few games towards their starting rating. Solved by Hunter's
@@ -42,11 +59,11 @@ def bradley_terry(
     # Games counted per unordered pair, so an iteration costs O(pairs), not O(n²): a stage's
     # history can hold hundreds of players, most of whom met only a few others.
     if games:
-        g = np.asarray(games, dtype=np.float64).reshape(-1, 3)
-        i, j, score = g[:, 0].astype(np.int64), g[:, 1].astype(np.int64), g[:, 2]
-        wins += np.bincount(i, score, n) + np.bincount(j, 1.0 - score, n)
-        keys, counts = np.unique(np.minimum(i, j) * n + np.maximum(i, j), return_counts=True)
-        pi, pj, counts = keys // n, keys % n, counts.astype(np.float64)
+        g = np.array([(*game[:3], game[3] if len(game) > 3 else 1.0) for game in games])
+        i, j, score, weight = g[:, 0].astype(np.int64), g[:, 1].astype(np.int64), g[:, 2], g[:, 3]
+        wins += np.bincount(i, weight * score, n) + np.bincount(j, weight * (1.0 - score), n)
+        keys, where = np.unique(np.minimum(i, j) * n + np.maximum(i, j), return_inverse=True)
+        pi, pj, counts = keys // n, keys % n, np.bincount(where.ravel(), weight)
     else:
         pi = pj = np.zeros(0, dtype=np.int64)
         counts = np.zeros(0)

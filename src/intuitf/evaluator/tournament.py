@@ -34,10 +34,12 @@ Two protocols share this code:
       pairing and the Elo start, but not the fit: anchoring survivors at their inflated ratings
       (they were chosen *because* they rated high) measurably lowered Kendall's tau;
     - ``history``, the verdicts of earlier tournaments under the same aspects and intent, joins
-      the fit instead: a survivor keeps the evidence it earned (its rating is the fit of all
-      its games, not a number carried over), so one unlucky verdict no longer sinks a
-      candidate that won a dozen before. Pairs that met in the history are not paired again
-      (a cached judge would repeat its verdict, which is no new evidence).
+      the fit instead, each with the weight its caller gives it: a survivor keeps the evidence
+      it earned (its rating is the fit of its games, not a number carried over). The session
+      fades a verdict by :data:`~intuitf.evaluator.ratings.HISTORY_FADE` per generation of
+      age: at full weight, an early winner's many wins over weak fields outranked newcomers
+      that beat it head to head, and the best pick stuck. Pairs that met in the history are
+      not paired again (a cached judge would repeat its verdict, which is no new evidence).
 
 Verdicts with ``p_first`` 0.5 (ties, or technical errors the judge reported as ties) score half a
 point each and are recorded, so the same pair never meets twice in one tournament.
@@ -75,6 +77,8 @@ Protocol = Literal["efficient", "paper"]
 ProgressFn = Callable[[int, int, int, Cost], None]
 #: Called with each judged match, in schedule order, as soon as its round is scored.
 MatchFn = Callable[["MatchRecord"], None]
+#: An earlier verdict: (first id, second id, score of first[, weight in the fit]).
+HistoryGame = tuple[str, str, float] | tuple[str, str, float, float]
 
 #: The judge counts as down when more than this share of the requests of
 #: ``JUDGE_DOWN_ROUNDS`` rounds in a row got no answer.
@@ -144,14 +148,16 @@ class SwissTournament:
         ids: Sequence[str],
         prior: dict[str, float] | None = None,
         progress: ProgressFn | None = None,
-        history: Sequence[tuple[str, str, float]] = (),
+        history: Sequence[HistoryGame] = (),
         on_match: MatchFn | None = None,
     ) -> TournamentResult:
         """Play the tournament and return ratings and ranking.
 
-        ``history`` holds earlier verdicts as ``(first id, second id, score of first)``; ids not
-        among ``ids`` are past players. The efficient protocol fits them with this
-        tournament's verdicts (see the module notes); the paper protocol ignores them.
+        ``history`` holds earlier verdicts as ``(first id, second id, score of first)``, or
+        with a fourth element, the verdict's weight in the fit (a faded one from an earlier
+        generation; see :data:`~intuitf.evaluator.ratings.HISTORY_FADE`); ids not among
+        ``ids`` are past players. The efficient protocol fits them with this tournament's
+        verdicts (see the module notes); the paper protocol ignores them.
 
         A match the judge fails with :class:`JudgeError` is recorded undecided and play goes on
         (see the module notes). If the judge raises :class:`BudgetExhausted`, or is down (more
@@ -193,7 +199,7 @@ class _State:
         ids: list[str],
         prior: dict[str, float] | None,
         progress: ProgressFn | None,
-        history: Sequence[tuple[str, str, float]] = (),
+        history: Sequence[HistoryGame] = (),
     ) -> None:
         self.cfg = cfg
         self.images = images
@@ -213,19 +219,21 @@ class _State:
         # A fixed random order breaks rating ties, so equal ratings do not favour input order.
         self.tiebreak = self.rng.permutation(self.n)
         self.met: set[frozenset[int]] = set()
-        #: Earlier verdicts, indexed over the current players followed by past ones.
-        self.history: list[tuple[int, int, float]] = []
+        #: Earlier verdicts with their weights, indexed over the current players followed by
+        #: past ones.
+        self.history: list[tuple[int, int, float, float]] = []
         self.n_players = self.n
         if cfg.protocol == "efficient" and history:
             index = {pid: i for i, pid in enumerate(ids)}
-            for first, second, score in history:
+            for first, second, score, *weight in history:
                 for pid in (str(first), str(second)):
                     if pid not in index:
                         index[pid] = len(index)
                 i, j = index[str(first)], index[str(second)]
                 if i == j:
                     continue
-                self.history.append((i, j, min(1.0, max(0.0, float(score)))))
+                w = float(weight[0]) if weight else 1.0
+                self.history.append((i, j, min(1.0, max(0.0, float(score))), w))
                 if i < self.n and j < self.n:
                     self.met.add(frozenset((i, j)))
             self.n_players = len(index)
@@ -276,7 +284,7 @@ class _State:
         # anchoring them there carries that winner's-curse bias into the new ranking; measured
         # in the benchmark, it lowered Kendall's tau. They only seed the first round's pairing.
         anchors = np.full(self.n_players, self.cfg.initial_rating)
-        games = self.history + self.games
+        games: list = [*self.history, *self.games]
         return bradley_terry(self.n_players, games, anchors, self.cfg.anchor_weight)[: self.n]
 
     def _pair(self, rnd: int) -> tuple[list[tuple[int, int]], int | None]:

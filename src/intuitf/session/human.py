@@ -70,13 +70,14 @@ def stated_orders(verdicts: Sequence[HumanVerdict], stage_index: int) -> list[tu
 
 def refit_ranking(
     ids: Sequence[str],
-    games: Sequence[tuple[str, str, float]],
+    games: Sequence[tuple[str, str, float] | tuple[str, str, float, float]],
     tiebreak: Sequence[str] = (),
     anchor_weight: float = 3.0,
     initial_rating: float = 1600.0,
     stated: Sequence[tuple[str, str]] = (),
 ) -> tuple[list[str], dict[str, float]]:
-    """Ranking and ratings of ``ids`` from all ``games`` (past players join the fit).
+    """Ranking and ratings of ``ids`` from all ``games`` (past players join the fit; a game's
+    optional fourth element is its weight).
 
     The same Bradley-Terry fit the efficient tournament uses; ties keep the order of
     ``tiebreak`` (the model's own ranking), so a fit with no new evidence changes nothing.
@@ -86,13 +87,13 @@ def refit_ranking(
     from intuitf.evaluator.tournament import bradley_terry
 
     index = {pid: i for i, pid in enumerate(ids)}
-    pairs: list[tuple[int, int, float]] = []
-    for a, b, s in games:
+    pairs: list[tuple[int, int, float, float]] = []
+    for a, b, s, *weight in games:
         for pid in (a, b):
             if pid not in index:
                 index[pid] = len(index)
         if a != b:
-            pairs.append((index[a], index[b], float(s)))
+            pairs.append((index[a], index[b], float(s), float(weight[0]) if weight else 1.0))
     n = len(index)
     ratings = bradley_terry(n, pairs, np.full(n, initial_rating), anchor_weight)[: len(ids)]
     order_hint = {pid: i for i, pid in enumerate(tiebreak)}

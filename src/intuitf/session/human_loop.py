@@ -19,6 +19,8 @@ from intuitf.tf import GaussianTF
 __all__ = ["HumanVerdicts", "VerdictHost"]
 
 Game = tuple[str, str, float]
+#: A model verdict with its weight in the fit (earlier generations' fade).
+WeightedGame = tuple[str, str, float, float]
 
 
 class VerdictHost(Protocol):
@@ -57,7 +59,7 @@ class HumanVerdicts:
         verdicts: Sequence[HumanVerdict] = (),
         *,
         pre_tell: dict[str, Any] | None = None,
-        judged_games: Sequence[Game] = (),
+        judged_games: Sequence[Sequence[Any]] = (),
         judged_stage: int = 0,
     ) -> None:
         self._host = host
@@ -71,7 +73,8 @@ class HumanVerdicts:
         self.model_ratings: dict[str, float] | None = None
         #: The verdicts the last generation was ranked with, and its stage (a stage change
         #: resets the stage's games; a person may still judge the last generation's gallery).
-        self.judged_games: list[Game] = list(judged_games)
+        #: The model verdicts the last generation was ranked with, weighted as then.
+        self.judged_games: list[WeightedGame] = _weighted(judged_games)
         self.judged_stage = int(judged_stage)
 
     # -- checkpoint -----------------------------------------------------------------------
@@ -94,7 +97,7 @@ class HumanVerdicts:
         self.model_ranking = ckpt.get("model_ranking")
         self.model_ratings = ckpt.get("model_ratings")
         if "judged_games" in ckpt:
-            self.judged_games = [(str(a), str(b), float(s)) for a, b, s in ckpt["judged_games"]]
+            self.judged_games = _weighted(ckpt["judged_games"])
             self.judged_stage = int(ckpt.get("judged_stage", self._host.stage_index))
 
     # -- verdicts -------------------------------------------------------------------------
@@ -145,7 +148,7 @@ class HumanVerdicts:
         ids: list[str],
         model_ranking: list[str],
         model_ratings: dict[str, float],
-        stage_games: list[Game],
+        stage_games: Sequence[Sequence[Any]],
         stage_index: int,
     ) -> tuple[list[str], dict[str, float]]:
         """The ranking of a generation just judged: the model's, refit with a person's verdicts
@@ -153,13 +156,13 @@ class HumanVerdicts:
         self.pre_tell = explorer_state
         self.model_ranking = list(model_ranking)
         self.model_ratings = dict(model_ratings)
-        self.judged_games, self.judged_stage = list(stage_games), stage_index
+        self.judged_games, self.judged_stage = _weighted(stage_games), stage_index
         human = self.games(stage_index)
         if not human:  # the model's ranking stands exactly as the tournament gave it
             return list(model_ranking), dict(model_ratings)
         return refit_ranking(
             ids,
-            stage_games + human,
+            [*self.judged_games, *human],
             tiebreak=list(model_ranking),
             stated=stated_orders(self.verdicts, stage_index),
         )
@@ -174,7 +177,7 @@ class HumanVerdicts:
             return model_ranking, dict(self.model_ratings or host.ratings)
         return refit_ranking(
             ids,
-            self.judged_games + human,
+            [*self.judged_games, *human],
             tiebreak=model_ranking,
             stated=stated_orders(self.verdicts, self.judged_stage),
         )
@@ -215,3 +218,8 @@ class HumanVerdicts:
             else:
                 self.retell()
         self._on_change(action, v)
+
+
+def _weighted(games: Sequence[Sequence[Any]]) -> list[WeightedGame]:
+    """Games as (first, second, score, weight); one without a weight counts once."""
+    return [(str(a), str(b), float(s), float(w[0]) if w else 1.0) for a, b, s, *w in games]

@@ -49,6 +49,7 @@ from intuitf.errors import (
     SessionError,
     StorageError,
 )
+from intuitf.evaluator.ratings import faded
 from intuitf.evaluator.types import Aspect, Cost, Intent, Judge
 from intuitf.session import opening
 from intuitf.session.events import EventLog
@@ -296,10 +297,12 @@ class Session:
         self.ratings: dict[str, float] = dict(ratings or {})
         self.last_ranking: list[str] = list(last_ranking or [])
         self.tfs: dict[str, GaussianTF] = dict(population_tfs or {})
-        #: The current stage's model verdicts so far, (first id, second id, score of first):
-        #: the tournament fits them with each new generation's, so survivors keep their evidence.
-        self.stage_games: list[tuple[str, str, float]] = [
-            (str(a), str(b), float(s)) for a, b, s in stage_games
+        #: The current stage's model verdicts so far, (first id, second id, score of first,
+        #: generation): the tournament fits them, faded by age, with each new generation's,
+        #: so survivors keep their evidence. (A checkpoint without the generation: the last.)
+        self.stage_games: list[tuple[str, str, float, int]] = [
+            (str(a), str(b), float(s), int(rest[0]) if rest else generation - 1)
+            for a, b, s, *rest in stage_games
         ]
         #: A person's verdicts, their undo and the re-ranking they cause (the human loop).
         self._verdicts = HumanVerdicts(
@@ -307,7 +310,7 @@ class Session:
             self._verdict_changed,
             human,
             pre_tell=pre_tell,
-            judged_games=self.stage_games,
+            judged_games=faded(self.stage_games, generation - 1),
             judged_stage=stage_index,
         )
         #: New questions asked during the run (:meth:`query`), and the current one's record.
@@ -863,7 +866,7 @@ class Session:
             seed=_generation_seed(self.settings.seed, g),
             protocol=self.settings.protocol,  # type: ignore[arg-type]  # checked by RunSettings
         )
-        history = self.stage_games + self._verdicts.games(self.stage_index)
+        history = faded(self.stage_games, g) + self._verdicts.games(self.stage_index)
 
         def on_match(m: Any) -> None:
             v = m.verdict
@@ -904,15 +907,16 @@ class Session:
         """The generation's ranking (the model's, refit with a person's verdicts of this
         stage when there are any), told to the Explorer."""
         ids = [c.id for c in candidates]
+        g = self.generation
         self.stage_games = self.stage_games + [
-            (m.first, m.second, float(m.verdict.p_first)) for m in result.matches
+            (m.first, m.second, float(m.verdict.p_first), g) for m in result.matches
         ]
         ranking, ratings = self._verdicts.rank_generation(
             self.explorer.state_dict(),
             ids,
             list(result.ranking),
             {cid: float(result.ratings[cid]) for cid in ids},
-            self.stage_games,
+            faded(self.stage_games, g),
             self.stage_index,
         )
         # Fitness comes from the ranking and the stage's pressure schedule.
