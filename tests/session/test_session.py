@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 from intuitf.errors import BudgetExhausted
-from intuitf.evaluator.tournament import default_rounds
+from intuitf.evaluator.metric import MetricJudge
+from intuitf.evaluator.ratings import HISTORY_FADE
+from intuitf.evaluator.tournament import SwissTournament, default_rounds
 from intuitf.evaluator.types import Intent
 from intuitf.session import RunDirectory, RunSettings, Session
 from intuitf.volume import phantom
@@ -203,6 +205,41 @@ def test_verdicts_of_the_stage_carry_over_and_reset_with_the_stage(vol, tmp_path
     s.step()  # the next tournament fits them with its own verdicts: the list grows
     assert len(s.stage_games) > len(ckpt["stage_games"])
     s.close()
+
+
+class _ModelLike:
+    """The metric's verdicts from a judge that does not say it is deterministic (a model)."""
+
+    name = "model-like"
+
+    def __init__(self) -> None:
+        self._metric = MetricJudge()
+
+    async def compare(self, first, second, aspects, intent):
+        return await self._metric.compare(first, second, aspects, intent)
+
+
+@pytest.mark.parametrize("judge", ["metric", "model"])
+def test_earlier_generations_verdicts_fade_unless_the_judge_is_deterministic(
+    vol, judge, monkeypatch
+):
+    histories = []
+    play = SwissTournament.run
+
+    async def spy(self, images, ids, prior=None, progress=None, history=(), on_match=None):
+        histories.append(list(history))
+        return await play(self, images, ids, prior, progress, history, on_match)
+
+    monkeypatch.setattr(SwissTournament, "run", spy)
+    j = MetricJudge() if judge == "metric" else _ModelLike()
+    s = Session.create(vol, intent=_intent(), judge=j, settings=RunSettings(**SETTINGS))
+    for _ in range(3):  # initialize, then two generations of customize
+        s.step()
+    s.close()
+    assert histories[1] == []  # a new stage starts without history
+    weights = {round(w, 9) for *_, w in histories[2]}
+    assert weights == ({1.0} if judge == "metric" else {round(HISTORY_FADE, 9)})
+    assert len(histories[2]) == len([g for g in s.stage_games if g[3] == 1])
 
 
 def test_a_checkpoint_whose_verdicts_lack_their_generation_resumes(vol, tmp_path):

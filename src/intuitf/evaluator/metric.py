@@ -317,6 +317,9 @@ class MetricJudge:
     """
 
     name = "metric"
+    #: The same pair always gets the same verdict (a run keeps its earlier verdicts at full
+    #: weight; see :data:`~intuitf.evaluator.ratings.HISTORY_FADE`).
+    deterministic = True
 
     def __init__(self, cache_size: int = 256) -> None:
         self.cache_size = int(cache_size)

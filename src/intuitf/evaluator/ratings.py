@@ -7,20 +7,22 @@ from collections.abc import Sequence
 
 import numpy as np
 
-#: Weight of a verdict from the tournament before, relative to this tournament's own; one
-#: from k tournaments ago weighs ``HISTORY_FADE ** k``. Survivors carry their record, but a
-#: candidate that beat weak fields for generations cannot outrank, on old wins, a newcomer
-#: that beat it: with full weight (1.0) the best pick stayed on an early winner that later
-#: candidates beat head to head (``benchmarks/tournament.py`` measures the pick).
+#: Weight of a verdict from the tournament before, relative to this tournament's own, when
+#: the judge is noisy (a model); one from k tournaments ago weighs ``HISTORY_FADE ** k``.
+#: Survivors were chosen for their high ratings, lucky wins included; at full weight those
+#: wins stay in every later fit (the winner's curse carried along), and an early winner that
+#: later candidates beat head to head stayed the best pick. ``benchmarks/tournament.py``
+#: measures the pick; a judge whose verdicts are ``deterministic`` has no lucky wins, and its
+#: verdicts keep full weight.
 HISTORY_FADE = 0.35
 
 
 def faded(
-    games: Sequence[tuple[str, str, float, int]], generation: int
+    games: Sequence[tuple[str, str, float, int]], generation: int, fade: float = HISTORY_FADE
 ) -> list[tuple[str, str, float, float]]:
     """Verdicts ``(first, second, score, generation played)`` weighted for the fit of
-    ``generation``: its own count once, each generation before by :data:`HISTORY_FADE` less."""
-    return [(a, b, s, HISTORY_FADE ** max(0, generation - g)) for a, b, s, g in games]
+    ``generation``: its own count once, each generation before ``fade`` times less."""
+    return [(a, b, s, fade ** max(0, generation - g)) for a, b, s, g in games]
 
 
 def default_rounds(n: int) -> int:

@@ -35,10 +35,11 @@ Two protocols share this code:
       (they were chosen *because* they rated high) measurably lowered Kendall's tau;
     - ``history``, the verdicts of earlier tournaments under the same aspects and intent, joins
       the fit instead, each with the weight its caller gives it: a survivor keeps the evidence
-      it earned (its rating is the fit of its games, not a number carried over). The session
-      fades a verdict by :data:`~intuitf.evaluator.ratings.HISTORY_FADE` per generation of
-      age: at full weight, an early winner's many wins over weak fields outranked newcomers
-      that beat it head to head, and the best pick stuck. Pairs that met in the history are
+      it earned (its rating is the fit of its games, not a number carried over). With a model
+      judge the session fades a verdict by :data:`~intuitf.evaluator.ratings.HISTORY_FADE`
+      per generation of age: at full weight, an early winner's lucky wins stayed in every
+      later fit and it outranked newcomers that beat it head to head (a deterministic
+      judge's verdicts keep full weight). Pairs that met in the history are
       not paired again (a cached judge would repeat its verdict, which is no new evidence).
 
 Verdicts with ``p_first`` 0.5 (ties, or technical errors the judge reported as ties) score half a

@@ -316,7 +316,12 @@ def _choice(score: float) -> Choice:
 
 @runtime_checkable
 class Judge(Protocol):
-    """Compares two renderings under aspects and an intent."""
+    """Compares two renderings under aspects and an intent.
+
+    A judge may also say ``deterministic = True`` when the same pair always gets the same
+    verdict (the offline metric): a run then fits its earlier generations' verdicts at full
+    weight instead of fading them (:data:`~intuitf.evaluator.ratings.HISTORY_FADE`).
+    """
 
     #: A short identifier used in cache keys and run records ("metric", "openai:gpt-4o", ...).
     name: str

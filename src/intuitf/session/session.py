@@ -49,7 +49,7 @@ from intuitf.errors import (
     SessionError,
     StorageError,
 )
-from intuitf.evaluator.ratings import faded
+from intuitf.evaluator.ratings import HISTORY_FADE, faded
 from intuitf.evaluator.types import Aspect, Cost, Intent, Judge
 from intuitf.session import opening
 from intuitf.session.events import EventLog
@@ -298,8 +298,9 @@ class Session:
         self.last_ranking: list[str] = list(last_ranking or [])
         self.tfs: dict[str, GaussianTF] = dict(population_tfs or {})
         #: The current stage's model verdicts so far, (first id, second id, score of first,
-        #: generation): the tournament fits them, faded by age, with each new generation's,
-        #: so survivors keep their evidence. (A checkpoint without the generation: the last.)
+        #: generation): the tournament fits them with each new generation's (a model judge's
+        #: faded by age), so survivors keep their evidence. (A checkpoint without the
+        #: generation: the last.)
         self.stage_games: list[tuple[str, str, float, int]] = [
             (str(a), str(b), float(s), int(rest[0]) if rest else generation - 1)
             for a, b, s, *rest in stage_games
@@ -310,7 +311,7 @@ class Session:
             self._verdict_changed,
             human,
             pre_tell=pre_tell,
-            judged_games=faded(self.stage_games, generation - 1),
+            judged_games=self._faded_games(generation - 1),
             judged_stage=stage_index,
         )
         #: New questions asked during the run (:meth:`query`), and the current one's record.
@@ -866,7 +867,7 @@ class Session:
             seed=_generation_seed(self.settings.seed, g),
             protocol=self.settings.protocol,  # type: ignore[arg-type]  # checked by RunSettings
         )
-        history = faded(self.stage_games, g) + self._verdicts.games(self.stage_index)
+        history = self._faded_games(g) + self._verdicts.games(self.stage_index)
 
         def on_match(m: Any) -> None:
             v = m.verdict
@@ -903,6 +904,12 @@ class Session:
                 )
             raise
 
+    def _faded_games(self, generation: int) -> list[tuple[str, str, float, float]]:
+        """The stage's verdicts weighted for the fit of ``generation``: earlier generations'
+        fade, unless the judge is deterministic (no lucky wins to forget)."""
+        fade = 1.0 if getattr(self.judge, "deterministic", False) else HISTORY_FADE
+        return faded(self.stage_games, generation, fade)
+
     def _tell(self, candidates: list[Any], result: Any) -> tuple[list[str], dict[str, float]]:
         """The generation's ranking (the model's, refit with a person's verdicts of this
         stage when there are any), told to the Explorer."""
@@ -916,7 +923,7 @@ class Session:
             ids,
             list(result.ranking),
             {cid: float(result.ratings[cid]) for cid in ids},
-            faded(self.stage_games, g),
+            self._faded_games(g),
             self.stage_index,
         )
         # Fitness comes from the ranking and the stage's pressure schedule.
