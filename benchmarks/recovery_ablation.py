@@ -11,6 +11,8 @@ about a minute per configuration on 2 cores). Configurations:
 - ``no-local``: no mutated copies of the best (``local_share`` 0 in every stage);
 - ``pair-by-order``: crossover pairs k-th lowest with k-th lowest, as the paper does;
 - ``no-history``: each tournament fits only its own verdicts;
+- ``full-history``: earlier generations' verdicts at full weight (the default fades them by
+  ``HISTORY_FADE`` per generation of age, the judge being noisy);
 - ``noise-free``: the default with a judge that never errs (what the search itself reaches);
 - ``random``: random search with the same judge, for reference.
 
@@ -42,6 +44,7 @@ CONFIGS = (
     "no-local",
     "pair-by-order",
     "no-history",
+    "full-history",
     "noise-free",
     "random",
 )
@@ -67,10 +70,14 @@ def _switch_off(config: str) -> None:
         from intuitf.evaluator import tournament
 
         class WithoutHistory(tournament.SwissTournament):
-            async def run(self, images, ids, prior=None, progress=None, history=()):
-                return await super().run(images, ids, prior=prior, progress=progress)
+            async def run(self, images, ids, prior=None, progress=None, history=(), **kw):
+                return await super().run(images, ids, prior=prior, progress=progress, **kw)
 
         tournament.SwissTournament = WithoutHistory  # the session imports it at each step
+    elif config == "full-history":
+        from intuitf.session import session
+
+        session.HISTORY_FADE = 1.0  # what the session weighs a model's earlier verdicts by
 
 
 _volumes: dict[str, tuple] = {}
