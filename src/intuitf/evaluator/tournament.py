@@ -39,8 +39,8 @@ Two protocols share this code:
       judge the session fades a verdict by :data:`~intuitf.evaluator.ratings.HISTORY_FADE`
       per generation of age: at full weight, an early winner's lucky wins stayed in every
       later fit and it outranked newcomers that beat it head to head (a deterministic
-      judge's verdicts keep full weight). Pairs that met in the history are
-      not paired again (a cached judge would repeat its verdict, which is no new evidence).
+      judge's verdicts keep full weight). Pairs that met in the history are not paired again
+      (a cached judge would repeat its verdict, which is no new evidence).
 
 Verdicts with ``p_first`` 0.5 (ties, or technical errors the judge reported as ties) score half a
 point each and are recorded, so the same pair never meets twice in one tournament.

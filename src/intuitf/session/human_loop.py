@@ -71,9 +71,9 @@ class HumanVerdicts:
         #: The last generation's ranking and ratings as the model's tournament gave them.
         self.model_ranking: list[str] | None = None
         self.model_ratings: dict[str, float] | None = None
-        #: The verdicts the last generation was ranked with, and its stage (a stage change
-        #: resets the stage's games; a person may still judge the last generation's gallery).
-        #: The model verdicts the last generation was ranked with, weighted as then.
+        #: The model verdicts the last generation was ranked with, weighted as then, and its
+        #: stage (a stage change resets the stage's games; a person may still judge the last
+        #: generation's gallery).
         self.judged_games: list[WeightedGame] = _weighted(judged_games)
         self.judged_stage = int(judged_stage)
 
