@@ -60,9 +60,10 @@ aspect key                     measure (higher is better unless noted)
 ``stroke_color_agreement``     minus the mean over strokes (the pixels of one colour) of
                                the mean CIE76 ΔE between the rendering, each pixel brightened
                                to the stroke colour's value (shading kept out), and the
-                               stroke's colour where the sketch's alpha > 0; a pixel where the base
-                               showed a structure and the rendering shows none counts as
-                               the worst ΔE (hiding a stroked structure is never a match)
+                               stroke's colour where the sketch's alpha > 0; a pixel where
+                               the base showed a structure and the rendering shows none
+                               counts as the worst ΔE (hiding a stroked structure is never a
+                               match)
 ``unmarked_preservation``      minus the mean ΔE to the base rendering where alpha == 0
 ``edit_instruction_alignment`` in the region (``intent.selection_mask``: the pixels the
                                selected features cover in the base; else the sketch's alpha;
@@ -902,13 +903,12 @@ def _stroke_delta_e(f: _Features, mask: np.ndarray, asked: np.ndarray) -> np.nda
     plain ΔE.
     """
     asked_lab = rgb2lab(asked[None])[0]
-    seen = f.lab[mask]
+    seen = f.lab[mask]  # boolean indexing copies: the cached features stay as they are
     if f.rgb is not None:
         pix = f.rgb[mask].astype(np.float32) / 255.0
         peak = pix.max(axis=1)
         lit = peak >= 0.05
         level = np.maximum(asked.max(axis=1), 1e-3)
-        seen = seen.copy()
         seen[lit] = _brightened_lab(pix[lit], peak[lit], level[lit])
     return np.linalg.norm(seen - asked_lab, axis=1)
 

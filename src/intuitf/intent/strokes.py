@@ -190,8 +190,8 @@ def stroke_hints(
     that material ("red crown, yellow dentin", as the paper reads that sketch); the other
     keeps the surface, translucent (``SEE_THROUGH``): opaque where it is thick, seen through
     where it is thin, so that both colours show where they were drawn; the material behind
-    starts strong (``SEEN_BEHIND``), as what shows of it is what the surface lets through. Strokes whose values
-    still overlap are pulled apart at the midpoint between their medians.
+    starts strong (``SEEN_BEHIND``), as what shows of it is what the surface lets through.
+    Strokes whose values still overlap are pulled apart at the midpoint between their medians.
     """
     sk = np.asarray(sketch)
     height, width = sk.shape[:2]
