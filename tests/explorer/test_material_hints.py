@@ -66,6 +66,51 @@ def test_hinted_tf_shows_what_the_words_ask_and_keeps_the_rest_quiet():
     assert min(tf.gaussians, key=lambda g: abs(g.mean - 0.3)).height == 0.0
 
 
+def test_a_structures_values_beyond_its_hints_spreads_take_its_colour():
+    """The engine's outer part holds values 0.31-0.59; its hint sits where it meets the air
+    (0.41) and its bulk (0.56) was a leftover material with any colour, 70 % of the time
+    hidden. Now the bulk gets a Gaussian of the outer part's colour and look."""
+    blue = (0.59, 0.75, 0.94)
+    outer = Hint("outer part", center=0.41, spread=0.05, color=blue, height=(0.08, 0.4),
+                 reach=(0.31, 0.59))  # fmt: skip
+    assert outer.reaches(0.56) and not outer.reaches(0.65)
+    assert Hint.from_dict(outer.to_dict()) == outer
+    with pytest.raises(ValueError, match="reach"):
+        Hint("x", center=0.4, reach=(0.6, 0.3))
+    mats = [Material(0.56, 0.017, 0.56), Material(0.78, 0.014, 0.02)]
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        tf = hinted_tf(rng, (outer,), mats, 4, Bounds())
+        bulk = min(tf.gaussians, key=lambda g: abs(g.mean - 0.56))
+        assert abs(bulk.mean - 0.56) < 1e-6 and 0.08 <= bulk.height <= 0.4
+        assert np.abs(np.subtract(bulk.color, blue)).max() < 0.25
+    # Without a reach the bulk is a material nobody named: never the outer part's Gaussian.
+    plain = Hint("outer part", center=0.41, spread=0.05, color=blue, height=(0.08, 0.4))
+    tf = hinted_tf(np.random.default_rng(0), (plain,), mats, 4, Bounds())
+    assert not plain.reaches(0.56)
+    assert all(g.height <= 0.03 for g in tf.gaussians if abs(g.mean - 0.56) < 1e-6)
+
+
+def test_a_hinted_gaussian_keeps_its_tail_off_another_named_materials_values():
+    """An orange inner part (0.74, spread 0.06) drawn 0.08 wide gave the blue outer part's
+    highest values (0.59) 14 % of its height: orange faces on the outer part."""
+    from intuitf.explorer.hints import NEIGHBOUR_TAIL
+
+    outer = Hint("outer part", center=0.41, spread=0.05, color=(0.59, 0.75, 0.94),
+                 reach=(0.31, 0.59))  # fmt: skip
+    inner = Hint("inner part", center=0.74, spread=0.06, color=(1.0, 0.55, 0.0),
+                 height=(0.4, 1.0), reach=(0.66, 0.9))  # fmt: skip
+    rng = np.random.default_rng(1)
+    widths = []
+    for _ in range(40):
+        tf = hinted_tf(rng, (outer, inner), [], 3, Bounds())
+        g = min(tf.gaussians, key=lambda g: abs(g.mean - 0.74))
+        widths.append(g.width)
+        tail = np.exp(-((g.mean - 0.59) ** 2) / (2 * g.width**2))
+        assert tail <= NEIGHBOUR_TAIL + 1e-9
+    assert max(widths) > 0.045  # narrowed only as far as needed
+
+
 def test_a_hints_colour_is_the_named_colour_not_a_neighbour():
     """Copies of a hint's colour vary only a little: "orange" stays orange (within ΔE2000 8
     nine times in ten), where a palette colour's full variation reached gold often."""

@@ -56,6 +56,11 @@ class Hint:
     direction: str | None = None
     #: An edit that names no colour keeps the selected features' colours.
     keep_color: bool = False
+    #: The values of the structure the hint was placed on (normalised, low to high), where
+    #: they reach beyond its spreads: a Gaussian centred there shows that structure too.
+    #: The engine's outer part holds values 0.31-0.59, its hint sits at 0.41 (where it meets
+    #: the air), and its bulk at 0.56 was a leftover material that got any colour.
+    reach: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         if self.direction not in EDIT_DIRECTIONS:
@@ -79,12 +84,27 @@ class Hint:
                     f"A hint's height band must be 0 < lo <= hi <= 1, got {self.height!r}."
                 )
             object.__setattr__(self, "height", (lo, hi))
+        if self.reach is not None:
+            a, b = (float(v) for v in self.reach)
+            if not 0.0 <= a <= b <= 1.0:
+                raise ValueError(f"A hint's reach must be 0 <= lo <= hi <= 1, got {self.reach!r}.")
+            object.__setattr__(self, "reach", (a, b))
 
     def reaches(self, mean: float) -> bool:
         """Whether a Gaussian at ``mean`` shows this hint's material."""
         if self.center is None:
             return True
+        if self.reach is not None and self.reach[0] <= mean <= self.reach[1]:
+            return True
         return abs(mean - self.center) <= max(_REACH * self.spread, _MIN_REACH)
+
+    def values(self) -> tuple[float, float] | None:
+        """The values this hint's material holds: its structure's, or its spreads' span."""
+        if self.center is None:
+            return None
+        if self.reach is not None:
+            return self.reach
+        return self.center - _REACH * self.spread, self.center + _REACH * self.spread
 
     def to_dict(self) -> dict:
         return {
@@ -96,6 +116,7 @@ class Hint:
             "hidden": self.hidden,
             "direction": self.direction,
             "keep_color": self.keep_color,
+            "reach": list(self.reach) if self.reach else None,
         }
 
     @classmethod
@@ -109,6 +130,7 @@ class Hint:
             hidden=bool(d.get("hidden", False)),
             direction=d.get("direction"),
             keep_color=bool(d.get("keep_color", False)),
+            reach=None if d.get("reach") is None else tuple(d["reach"]),
         )
 
 
@@ -191,7 +213,22 @@ def hinted_tf(
         band = h.height or bounds.height_init
         height = 0.0 if h.hidden else sample_hint_height(rng, band, bounds)
         rgb = hint_color(rng, h.color, bounds) if h.color else color(rng)
+        width = _apart(mean, width, h, placed, bounds)
         gs.append(Gaussian(mean, width, height, rgb))
+    # A material inside a placed structure's values but beyond its Gaussian's span (the
+    # engine's outer part meets the air at 0.41, its bulk is at 0.56) is that structure too:
+    # a Gaussian of its own, in the structure's colour and look, where one is left.
+    for m in materials:
+        if len(gs) >= n_gaussians:
+            break
+        h = hint_for(m.center, placed)
+        if h is None or h.reach is None or abs(m.center - h.center) <= _REACH * h.spread:
+            continue
+        width = _apart(m.center, min(bounds.width[1], max(bounds.width[0], m.spread)), h, placed,
+                       bounds)  # fmt: skip
+        rgb = hint_color(rng, h.color, bounds) if h.color else color(rng)
+        height = sample_hint_height(rng, h.height or bounds.height_init, bounds)
+        gs.append(Gaussian(float(m.center), float(width), height, rgb))
     others = [m for m in materials if all(not h.reaches(m.center) for h in avoid)]
     order = list(rng.permutation(len(others))) if others else []
     while len(gs) < n_gaussians:
@@ -212,6 +249,27 @@ def hinted_tf(
             height = sample_hint_height(rng, (lo, max(lo, 0.03)), bounds)
         gs.append(Gaussian(float(mean), float(width), height, color(rng)))
     return GaussianTF(tuple(sorted(gs, key=lambda g: g.mean)), value_range=value_range)
+
+
+#: A hinted Gaussian of the first population gives the values of another named material at
+#: most this share of its height with its tail. An orange "inner part" 0.08 wide gave the
+#: engine's outer part's highest values 14 % of its height: the blue outer part showed
+#: orange faces (ΔE2000 30 against 6 at 2.2 %).
+NEIGHBOUR_TAIL = 0.025
+
+
+def _apart(mean: float, width: float, hint: Hint, placed: Sequence[Hint], bounds: Bounds) -> float:
+    """``width`` narrowed so that a Gaussian of ``hint`` at ``mean`` keeps its tail off the
+    values of the other ``placed`` hints (to ``NEIGHBOUR_TAIL``), not below the bounds."""
+    k = math.sqrt(2.0 * math.log(1.0 / NEIGHBOUR_TAIL))
+    for other in placed:
+        span = other.values()
+        if other is hint or span is None or (other.color == hint.color and other.color):
+            continue
+        gap = max(span[0] - mean, mean - span[1])
+        if gap > 0.0:
+            width = min(width, max(bounds.width[0], gap / k))
+    return width
 
 
 def edit_hint(hints: Sequence[Hint]) -> Hint | None:
