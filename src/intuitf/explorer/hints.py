@@ -98,14 +98,6 @@ class Hint:
             return True
         return abs(mean - self.center) <= max(_REACH * self.spread, _MIN_REACH)
 
-    def values(self) -> tuple[float, float] | None:
-        """The values this hint's material holds: its structure's, or its spreads' span."""
-        if self.center is None:
-            return None
-        if self.reach is not None:
-            return self.reach
-        return self.center - _REACH * self.spread, self.center + _REACH * self.spread
-
     def to_dict(self) -> dict:
         return {
             "name": self.name,
@@ -192,7 +184,7 @@ def hinted_tf(
     Each hint with a ``center`` gets a Gaussian near it (about its spread wide), in its colour
     (slightly varied; ``color`` when the hint names none) and with a height from its band
     (the bounds' initial range when it names none), no wider than keeps its tail off the
-    other hints' values (:data:`NEIGHBOUR_TAIL`). With more hints than Gaussians a random
+    values of the other hints' structures (:data:`NEIGHBOUR_TAIL`). With more hints than Gaussians a random
     subset is used. A material within a hint's ``reach`` but beyond its spreads gets a
     Gaussian of that hint too. Gaussians left over go to the volume's other ``materials`` and
     are hidden (height 0) with ``hide_prob``, else faint: what the words did not name stays
@@ -262,10 +254,17 @@ NEIGHBOUR_TAIL = 0.025
 
 def _apart(mean: float, width: float, hint: Hint, placed: Sequence[Hint], bounds: Bounds) -> float:
     """``width`` narrowed so that a Gaussian of ``hint`` at ``mean`` keeps its tail off the
-    values of the other ``placed`` hints (to ``NEIGHBOUR_TAIL``), not below the bounds."""
+    values of the other ``placed`` hints' structures (their ``reach``, to ``NEIGHBOUR_TAIL``),
+    not below the bounds.
+
+    Only structures whose values are known count: a sketch's strokes on one material (the
+    tooth's crown top and middle) overlap on purpose. Narrowed by each other's spreads as
+    well, the tooth sketch's crown middle went from ΔE2000 9.4 to 13.9 with the labelling
+    oracle (6 seeds).
+    """
     k = math.sqrt(2.0 * math.log(1.0 / NEIGHBOUR_TAIL))
     for other in placed:
-        span = other.values()
+        span = other.reach
         if other is hint or span is None or (other.color == hint.color and other.color):
             continue
         gap = max(span[0] - mean, mean - span[1])
