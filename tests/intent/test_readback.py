@@ -20,6 +20,9 @@ def test_words_are_read_back_with_where_they_landed_and_what_was_not_understood(
     skin = next(line for line in lines if line.startswith('"skin"'))
     assert "ivory, opaque" in bone and "values around" in bone
     assert "red, faint" in skin
+    # Skin colours the body under its edge too, and says how far.
+    assert "and the body under it, values up to" in skin
+    assert "up to" not in bone
     assert lines[-1] == "not understood: gizmo"
     # Words that name nothing the volume has say so, rather than nothing.
     assert read_back(Intent(kind="text", text="make it nice"), vol) == [

@@ -79,7 +79,11 @@ def _place(h, smap, value_range, kind: str) -> str:
     how = {"hounsfield": "by its CT values", "density order": "by density order",
            "main": "the volume's main material",
            "boundary": "the object's outer boundary"}.get(h.placed_by, "")  # fmt: skip
-    return f"{where} ({how})" if how else where
+    where = f"{where} ({how})" if how else where
+    if h.reach is not None and h.reach[1] > h.center:
+        # Skin on a body's edge colours the body's values under it too (up to the bone).
+        where += f", and the body under it, values up to {_raw(h.reach[1], value_range)}"
+    return where
 
 
 def _raw(v: float, value_range) -> str:
