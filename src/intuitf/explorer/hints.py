@@ -184,11 +184,11 @@ def hinted_tf(
     Each hint with a ``center`` gets a Gaussian near it (about its spread wide), in its colour
     (slightly varied; ``color`` when the hint names none) and with a height from its band
     (the bounds' initial range when it names none), no wider than keeps its tail off the
-    values of the other hints' structures (:data:`NEIGHBOUR_TAIL`). With more hints than Gaussians a random
-    subset is used. A material within a hint's ``reach`` but beyond its spreads gets a
-    Gaussian of that hint too. Gaussians left over go to the volume's other ``materials`` and
-    are hidden (height 0) with ``hide_prob``, else faint: what the words did not name stays
-    out of the way, but remains one toggle from view.
+    values of the other hints' structures (:data:`NEIGHBOUR_TAIL`). With more hints than
+    Gaussians a random subset is used. A material within a hint's ``reach`` but beyond its
+    spreads gets a Gaussian of that hint too. Gaussians left over go to the volume's other
+    ``materials`` and are hidden (height 0) with ``hide_prob``, else faint: what the words
+    did not name stays out of the way, but remains one toggle from view.
     """
     color = color or bounds.sample_color
     # A hidden material needs no Gaussian (not showing it is the point); it still keeps
