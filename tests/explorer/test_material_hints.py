@@ -111,11 +111,16 @@ def test_a_hinted_gaussian_keeps_its_tail_off_another_named_materials_values():
     assert max(widths) > 0.045  # narrowed only as far as needed
     # A sketch's strokes have no structure's values: strokes on one material overlap on
     # purpose, and their Gaussians keep their widths.
+    # (Kept off the red stroke's spreads, 0.83-0.93, the blue one would be at most 0.03 wide.)
     red = Hint("stroke", center=0.88, spread=0.02, color=(0.86, 0.12, 0.12))
     yellow = Hint("stroke", center=0.89, spread=0.03, color=(1.0, 0.86, 0.0))
-    blue = Hint("stroke", center=0.62, spread=0.1, color=(0.25, 0.4, 0.9))
-    a = hinted_tf(np.random.default_rng(2), (red, yellow, blue), [], 3, Bounds())
-    assert max(g.width for g in a.gaussians if abs(g.mean - 0.62) < 0.1) > 0.09
+    blue = Hint("stroke", center=0.75, spread=0.03, color=(0.25, 0.4, 0.9))
+    rng = np.random.default_rng(2)
+    blues = []
+    for _ in range(40):
+        a = hinted_tf(rng, (red, yellow, blue), [], 3, Bounds())
+        blues.append(max(g.width for g in a.gaussians if abs(g.mean - 0.75) < 0.03))
+    assert max(blues) > 0.04
 
 
 def test_a_hints_colour_is_the_named_colour_not_a_neighbour():
