@@ -262,15 +262,20 @@ def _apart(mean: float, width: float, hint: Hint, placed: Sequence[Hint], bounds
     well, the tooth sketch's crown middle went from ΔE2000 9.4 to 13.9 with the labelling
     oracle (6 seeds).
     """
-    k = math.sqrt(2.0 * math.log(1.0 / NEIGHBOUR_TAIL))
     for other in placed:
         span = other.reach
         if other is hint or span is None or (other.color == hint.color and other.color):
             continue
         gap = max(span[0] - mean, mean - span[1])
         if gap > 0.0:
-            width = min(width, max(bounds.width[0], gap / k))
+            width = min(width, max(bounds.width[0], widest_for_tail(gap, 1.0, NEIGHBOUR_TAIL)))
     return width
+
+
+def widest_for_tail(distance: float, height: float, tail: float) -> float:
+    """The width of the widest Gaussian of ``height`` whose tail at ``distance`` from its
+    mean is ``tail`` (< ``height``)."""
+    return distance / math.sqrt(2.0 * math.log(height / tail))
 
 
 def edit_hint(hints: Sequence[Hint]) -> Hint | None:
@@ -368,7 +373,7 @@ def quiet_hidden(tf: GaussianTF, hints: Sequence[Hint], bounds: Bounds) -> Gauss
             w_max = math.inf
             for dist, eps in ((gap, HIDDEN_EPS), (abs(g.mean - h.center), HIDDEN_CORE_EPS)):
                 if g.height * math.exp(-(dist**2) / (2.0 * g.width**2)) > eps:
-                    w_max = min(w_max, dist / math.sqrt(2.0 * math.log(g.height / eps)))
+                    w_max = min(w_max, widest_for_tail(dist, g.height, eps))
             if w_max == math.inf:
                 continue
             if w_max >= bounds.width[0]:
