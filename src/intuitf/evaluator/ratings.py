@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -23,6 +24,12 @@ def faded(
     """Verdicts ``(first, second, score, generation played)`` weighted for the fit of
     ``generation``: its own count once, each generation before ``fade`` times less."""
     return [(a, b, s, fade ** max(0, generation - g)) for a, b, s, g in games]
+
+
+def with_weights(games: Iterable[Sequence[Any]]) -> list[tuple[Any, Any, float, float]]:
+    """Games ``(first, second, score[, weight])`` as ``(first, second, score, weight)``: a
+    game without a weight counts once."""
+    return [(a, b, float(s), float(w[0]) if w else 1.0) for a, b, s, *w in games]
 
 
 def default_rounds(n: int) -> int:
@@ -61,7 +68,7 @@ def bradley_terry(
     # Games counted per unordered pair, so an iteration costs O(pairs), not O(n²): a stage's
     # history can hold hundreds of players, most of whom met only a few others.
     if games:
-        g = np.array([(*game[:3], game[3] if len(game) > 3 else 1.0) for game in games])
+        g = np.array(with_weights(games), dtype=np.float64)
         i, j, score, weight = g[:, 0].astype(np.int64), g[:, 1].astype(np.int64), g[:, 2], g[:, 3]
         wins += np.bincount(i, weight * score, n) + np.bincount(j, weight * (1.0 - score), n)
         keys, where = np.unique(np.minimum(i, j) * n + np.maximum(i, j), return_inverse=True)

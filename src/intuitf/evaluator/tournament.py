@@ -71,7 +71,7 @@ import numpy as np
 
 from intuitf.errors import IntuitfError, JudgeError
 from intuitf.evaluator.matches import MatchRecord, MatchStats, TournamentResult
-from intuitf.evaluator.ratings import bradley_terry, default_rounds, elo_expected
+from intuitf.evaluator.ratings import bradley_terry, default_rounds, elo_expected, with_weights
 from intuitf.evaluator.types import Aspect, Choice, Cost, Intent, Judge, Verdict, combine_answers
 
 Protocol = Literal["efficient", "paper"]
@@ -226,15 +226,14 @@ class _State:
         self.n_players = self.n
         if cfg.protocol == "efficient" and history:
             index = {pid: i for i, pid in enumerate(ids)}
-            for first, second, score, *weight in history:
+            for first, second, score, weight in with_weights(history):
                 for pid in (str(first), str(second)):
                     if pid not in index:
                         index[pid] = len(index)
                 i, j = index[str(first)], index[str(second)]
                 if i == j:
                     continue
-                w = float(weight[0]) if weight else 1.0
-                self.history.append((i, j, min(1.0, max(0.0, float(score))), w))
+                self.history.append((i, j, min(1.0, max(0.0, score)), weight))
                 if i < self.n and j < self.n:
                     self.met.add(frozenset((i, j)))
             self.n_players = len(index)

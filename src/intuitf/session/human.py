@@ -84,16 +84,16 @@ def refit_ranking(
     ``stated`` pairs (winner, loser) are what a person said outright: the ranking honours
     each one (the newest wins where two disagree), moving the winner just above the loser.
     """
-    from intuitf.evaluator.tournament import bradley_terry
+    from intuitf.evaluator.ratings import bradley_terry, with_weights
 
     index = {pid: i for i, pid in enumerate(ids)}
     pairs: list[tuple[int, int, float, float]] = []
-    for a, b, s, *weight in games:
+    for a, b, s, weight in with_weights(games):
         for pid in (a, b):
             if pid not in index:
                 index[pid] = len(index)
         if a != b:
-            pairs.append((index[a], index[b], float(s), float(weight[0]) if weight else 1.0))
+            pairs.append((index[a], index[b], s, weight))
     n = len(index)
     ratings = bradley_terry(n, pairs, np.full(n, initial_rating), anchor_weight)[: len(ids)]
     order_hint = {pid: i for i, pid in enumerate(tiebreak)}

@@ -13,6 +13,7 @@ from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
 from intuitf.errors import SessionError
+from intuitf.evaluator.ratings import with_weights
 from intuitf.session.human import HumanVerdict, refit_ranking, stated_orders, weighted_games
 from intuitf.tf import GaussianTF
 
@@ -221,5 +222,5 @@ class HumanVerdicts:
 
 
 def _weighted(games: Sequence[Sequence[Any]]) -> list[WeightedGame]:
-    """Games as (first, second, score, weight); one without a weight counts once."""
-    return [(str(a), str(b), float(s), float(w[0]) if w else 1.0) for a, b, s, *w in games]
+    """Games as (first id, second id, score, weight) (:func:`with_weights`)."""
+    return [(str(a), str(b), s, w) for a, b, s, w in with_weights(games)]
