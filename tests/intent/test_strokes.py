@@ -131,6 +131,33 @@ def test_two_strokes_on_one_material_go_to_it_and_to_the_material_behind_the_thi
     assert any("translucent" in n and "yellow" in n for n in red.notes)
 
 
+def test_the_translucent_stroke_keeps_to_the_values_only_the_thick_part_reaches():
+    """Where the cap is thick a ray meets denser values than at its thin skin (the tooth's
+    enamel: 0.90-0.92 on the cusps, 0.87-0.89 at its lower edge): the red stroke's Gaussian
+    goes there, so the thin skin the yellow stroke looks through stays clear of it."""
+    vol, upper, lower = capped()
+    d = vol.data.copy()
+    d[21:30, 8:34, 10:20] = 0.93  # half the cap is dense under its 0.9 face
+    vol = Volume.from_array(d, value_range=(0.0, 1.0))
+    cam = Camera(azimuth=0.0, elevation=0.0)
+    size = 64
+    r = VolumeRenderer(Volume.from_array(upper.astype(np.float32)), size=size, shading=False)
+    tf = GaussianTF((Gaussian(1.0, 0.1, 0.8, (1, 1, 1)),))
+    up = r.render_rgba(tf, cam)[..., 3] > 0.5
+    r = VolumeRenderer(Volume.from_array(lower.astype(np.float32)), size=size, shading=False)
+    low = r.render_rgba(tf, cam)[..., 3] > 0.5
+    sk = np.zeros((size, size, 4), np.uint8)
+    for mask, colour in ((up, (220, 30, 30)), (low, (240, 220, 40))):
+        m = ndimage.binary_erosion(mask, iterations=3)
+        sk[m, :3], sk[m, 3] = colour, 255
+    got = {h.rgb[1] > 0.5: h for h in stroke_hints(sk, vol.data, vol.spacing, cam, 0.1)}
+    red, yellow = got[False], got[True]
+    assert abs(yellow.center - 0.6) < 0.03 and red.height == SEE_THROUGH
+    assert abs(red.center - 0.93) < 0.01
+    # The red Gaussian is all but gone at the thin skin's 0.9.
+    assert np.exp(-0.5 * ((0.9 - red.center) / red.spread) ** 2) < 0.1
+
+
 def test_a_strokes_edge_in_a_neighbouring_colour_bin_is_the_same_stroke():
     """A stroke drawn in #30a0ff has antialiased pixels at 47 beside 48 (another bin): they
     are its edge, not a second blue stroke competing with it for the same values."""
