@@ -94,3 +94,24 @@ def test_its_checkpoint_state_restores_an_equal_loop():
     again.restore(state)
     assert again.state() == state
     assert again.refit() == loop.refit()
+
+
+def test_a_persons_verdict_enters_the_fit_once_with_its_weight():
+    """One game per stated pair, weighted :data:`HUMAN_WEIGHT`: the fit ranks as if it were
+    that many model verdicts, and an undone or other-stage verdict adds nothing."""
+    from intuitf.session.human import HUMAN_WEIGHT, refit_ranking, weighted_games
+
+    ids = ["a", "b", "c"]
+    # The model's record: a beat b three times, b beat c three times, c beat a once.
+    model = [("a", "b", 1.0)] * 3 + [("b", "c", 1.0)] * 3 + [("c", "a", 1.0)]
+    said = HumanVerdict(1, "prefer", ["c"], ["b"], generation=0, stage_index=0)
+    other = HumanVerdict(2, "prefer", ["b"], ["a"], generation=0, stage_index=1)
+    undone = HumanVerdict(3, "prefer", ["b"], ["a"], generation=0, stage_index=0, undone=True)
+    games = weighted_games([said, other, undone], 0)
+    assert games == [("c", "b", 1.0, float(HUMAN_WEIGHT))]
+    order, rating = refit_ranking(ids, model + games)
+    repeated, by_copies = refit_ranking(ids, model + [("c", "b", 1.0)] * HUMAN_WEIGHT)
+    assert order == repeated
+    assert all(abs(rating[k] - by_copies[k]) < 1e-6 for k in ids)
+    # And it weighs more than one model verdict: c passes b only because a person said so.
+    assert refit_ranking(ids, model + [("c", "b", 1.0)])[0].index("c") > order.index("c")

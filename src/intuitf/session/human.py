@@ -1,7 +1,7 @@
 """A person's verdicts in the tournament: preferences, best-of and worst-of, with undo.
 
 A person's verdict is evidence like a model's, only stronger: each one enters the stage's
-Bradley-Terry fit as :data:`HUMAN_WEIGHT` games (a model verdict counts as one), so a
+Bradley-Terry fit with weight :data:`HUMAN_WEIGHT` (a model verdict counts as one game), so a
 preference moves a ranking that a handful of model verdicts decided, but does not erase a
 clear record. The Session keeps the list (journaled and in its checkpoint); an undone verdict
 stays in the list, marked, so the history shows what happened.
@@ -49,13 +49,17 @@ class HumanVerdict:
         return cls(**d)
 
 
-def weighted_games(verdicts: Sequence[HumanVerdict], stage_index: int) -> list:
-    """The active human games of a stage, each repeated :data:`HUMAN_WEIGHT` times."""
-    out: list[tuple[str, str, float]] = []
-    for v in verdicts:
-        if not v.undone and v.stage_index == stage_index:
-            out.extend(g for g in v.games for _ in range(HUMAN_WEIGHT))
-    return out
+def weighted_games(
+    verdicts: Sequence[HumanVerdict], stage_index: int
+) -> list[tuple[str, str, float, float]]:
+    """The active human games of a stage, each with weight :data:`HUMAN_WEIGHT` (the
+    Bradley-Terry fit counts a game of weight w as w games)."""
+    return [
+        (a, b, s, float(HUMAN_WEIGHT))
+        for v in verdicts
+        if not v.undone and v.stage_index == stage_index
+        for a, b, s in v.games
+    ]
 
 
 def stated_orders(verdicts: Sequence[HumanVerdict], stage_index: int) -> list[tuple[str, str]]:

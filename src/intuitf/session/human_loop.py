@@ -19,8 +19,8 @@ from intuitf.tf import GaussianTF
 
 __all__ = ["HumanVerdicts", "VerdictHost"]
 
-Game = tuple[str, str, float]
-#: A model verdict with its weight in the fit (earlier generations' fade).
+#: A verdict with its weight in the fit (a model's: its generation's fade; a person's:
+#: :data:`~intuitf.session.human.HUMAN_WEIGHT`).
 WeightedGame = tuple[str, str, float, float]
 
 
@@ -138,7 +138,7 @@ class HumanVerdicts:
         self._apply("undone", v)
         return v
 
-    def games(self, stage_index: int) -> list[Game]:
+    def games(self, stage_index: int) -> list[WeightedGame]:
         """The active verdicts of a stage as weighted games for the tournament's fit."""
         return weighted_games(self.verdicts, stage_index)
 
