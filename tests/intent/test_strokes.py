@@ -86,10 +86,10 @@ def test_the_metric_judge_measures_each_stroke_alike():
     )
 
 
-def capped() -> tuple[Volume, np.ndarray, np.ndarray]:
-    """A block whose upper half is solid 0.9 and whose lower half is 0.6 under a two-voxel
-    0.9 skin (a tooth's enamel: thick on the crown, thin at its lower edge), and the masks
-    (z, y, x) of the two halves."""
+def capped(skin: int = 2) -> tuple[Volume, np.ndarray, np.ndarray]:
+    """A block whose upper half is solid 0.9 and whose lower half is 0.6 under a ``skin``
+    voxels deep 0.9 skin (a tooth's enamel: thick on the crown, thin at its lower edge), and
+    the masks (z, y, x) of the two halves."""
     d = np.full((40, 40, 40), 0.02, np.float32)
     upper = np.zeros(d.shape, bool)
     lower = np.zeros(d.shape, bool)
@@ -98,12 +98,13 @@ def capped() -> tuple[Volume, np.ndarray, np.ndarray]:
     lower[10:19, 6:34, 10:30] = True
     d[upper] = 0.9
     d[lower] = 0.9
-    d[12:17, 8:32, 12:28] = 0.6
+    d[12:17, 6 + skin : 32, 12:28] = 0.6
     return Volume.from_array(d, value_range=(0.0, 1.0)), upper, lower
 
 
-def test_two_strokes_on_one_material_go_to_it_and_to_the_material_behind_the_thin_one():
-    vol, upper, lower = capped()
+def red_and_yellow_over(vol: Volume, upper: np.ndarray, lower: np.ndarray):
+    """The stroke hints of red drawn over the upper half and yellow over the lower one, seen
+    along y: (red, yellow)."""
     cam = Camera(azimuth=0.0, elevation=0.0)
     size = 64
     r = VolumeRenderer(Volume.from_array(upper.astype(np.float32)), size=size, shading=False)
@@ -118,7 +119,11 @@ def test_two_strokes_on_one_material_go_to_it_and_to_the_material_behind_the_thi
         assert m.sum() > 20
         sk[m, :3], sk[m, 3] = colour, 255
     got = {h.rgb[1] > 0.5: h for h in stroke_hints(sk, vol.data, vol.spacing, cam, 0.1)}
-    red, yellow = got[False], got[True]
+    return got[False], got[True]
+
+
+def test_two_strokes_on_one_material_go_to_it_and_to_the_material_behind_the_thin_one():
+    red, yellow = red_and_yellow_over(*capped())
     # Both strokes lie on 0.9: red keeps it, yellow means what its thin skin covers.
     assert abs(red.center - 0.9) < 0.03
     assert abs(yellow.center - 0.6) < 0.03
@@ -138,24 +143,19 @@ def test_the_translucent_stroke_keeps_to_the_values_only_the_thick_part_reaches(
     vol, upper, lower = capped()
     d = vol.data.copy()
     d[21:30, 8:34, 10:20] = 0.93  # half the cap is dense under its 0.9 face
-    vol = Volume.from_array(d, value_range=(0.0, 1.0))
-    cam = Camera(azimuth=0.0, elevation=0.0)
-    size = 64
-    r = VolumeRenderer(Volume.from_array(upper.astype(np.float32)), size=size, shading=False)
-    tf = GaussianTF((Gaussian(1.0, 0.1, 0.8, (1, 1, 1)),))
-    up = r.render_rgba(tf, cam)[..., 3] > 0.5
-    r = VolumeRenderer(Volume.from_array(lower.astype(np.float32)), size=size, shading=False)
-    low = r.render_rgba(tf, cam)[..., 3] > 0.5
-    sk = np.zeros((size, size, 4), np.uint8)
-    for mask, colour in ((up, (220, 30, 30)), (low, (240, 220, 40))):
-        m = ndimage.binary_erosion(mask, iterations=3)
-        sk[m, :3], sk[m, 3] = colour, 255
-    got = {h.rgb[1] > 0.5: h for h in stroke_hints(sk, vol.data, vol.spacing, cam, 0.1)}
-    red, yellow = got[False], got[True]
+    red, yellow = red_and_yellow_over(Volume.from_array(d, value_range=(0.0, 1.0)), upper, lower)
     assert abs(yellow.center - 0.6) < 0.03 and red.height == SEE_THROUGH
     assert abs(red.center - 0.93) < 0.01
     # The red Gaussian is all but gone at the thin skin's 0.9.
     assert np.exp(-0.5 * ((0.9 - red.center) / red.spread) ** 2) < 0.1
+
+
+def test_the_material_behind_is_found_under_a_skin_as_deep_as_the_tooths_lower_enamel():
+    """Seen obliquely, the enamel at the crown's middle is 8-10 voxels deep along a ray: the
+    dentin behind it is still what the yellow stroke means."""
+    red, yellow = red_and_yellow_over(*capped(skin=12))
+    assert abs(yellow.center - 0.6) < 0.03 and yellow.height == SEEN_BEHIND
+    assert abs(red.center - 0.9) < 0.03 and red.height == SEE_THROUGH
 
 
 def test_a_strokes_edge_in_a_neighbouring_colour_bin_is_the_same_stroke():
