@@ -130,8 +130,8 @@ def layer_values(
     densest value within ``SURFACE_DEPTH`` voxels behind where its ray first exceeds
     ``threshold``; and the value of the material right behind that surface: of the object's
     values at least ``OTHER_MATERIAL`` from the surface value within ``BEHIND_DEPTH`` voxels
-    after the surface layer, the median of the first ``BEHIND_LAYER`` voxels' worth. NaN: no hit (both), or the surface material
-    goes on that deep (the second)."""
+    after the surface layer, the median of the first ``BEHIND_LAYER`` voxels' worth. NaN: no
+    hit (both), or the surface material goes on that deep (the second)."""
     sp = np.asarray(spacing, dtype=np.float64)
     shape_xyz = np.asarray(data.shape[::-1], dtype=np.float64)
     extent = (shape_xyz - 1.0) * sp
