@@ -113,5 +113,8 @@ def test_a_persons_verdict_enters_the_fit_once_with_its_weight():
     repeated, by_copies = refit_ranking(ids, model + [("c", "b", 1.0)] * HUMAN_WEIGHT)
     assert order == repeated
     assert all(abs(rating[k] - by_copies[k]) < 1e-6 for k in ids)
-    # And it weighs more than one model verdict: c passes b only because a person said so.
-    assert refit_ranking(ids, model + [("c", "b", 1.0)])[0].index("c") > order.index("c")
+    # And it weighs more than one model verdict: c passes b when a person says so, not when
+    # one more model verdict does.
+    assert order.index("c") < order.index("b")
+    one_more = refit_ranking(ids, model + [("c", "b", 1.0)])[0]
+    assert one_more.index("c") > one_more.index("b")
