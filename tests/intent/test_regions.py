@@ -196,6 +196,31 @@ def test_the_session_gives_its_judge_the_regions_of_its_camera(tmp_path):
         sess.close()
 
 
+def test_soil_with_the_trunks_values_in_front_of_the_pot_is_not_the_pots_region():
+    """The bonsai's soil fills the bowl with the trunk's values: a 1-D TF shows it in the
+    trunk's colour whatever the pot's is. Seen from above, the pot's region held the soil's
+    top (80 % of the real bonsai's pot region, none of it ever brown), so a judge checking the
+    pot gained little from a brown pot and lost little to silver paint on its wall. The wall
+    stays the pot's; the thin trunk, with leaf specks in front of it, keeps its region."""
+    from intuitf.intent.regions import front_depth, silhouette
+
+    vol = Volume.from_array(potted_tree(soil=True), value_range=(0.0, 1.0))
+    above = Camera(azimuth=0.0, elevation=40.0, roll=0.0)
+    size = (128, 96)
+    regions = {r.name: r for r in part_regions(Intent(kind="text", text=TREE_TEXT), vol, above,
+                                                size)}  # fmt: skip
+    d, z = vol.data, np.arange(vol.data.shape[0])[:, None, None]
+    soil = np.isclose(d, 0.5, atol=0.05) & (z <= 10)
+    pot = np.isclose(d, 0.85, atol=0.05)
+    soil_seen = silhouette(soil, vol.spacing, above, size) & (
+        front_depth(soil, vol.spacing, above, size) < front_depth(pot, vol.spacing, above, size)
+    )
+    assert soil_seen.sum() > 200
+    assert (regions["pot"].mask & soil_seen).sum() < 0.05 * soil_seen.sum()
+    assert (regions["pot"].mask & ~soil_seen).sum() > 300  # its wall
+    assert regions["branch"].mask.sum() > 30
+
+
 def test_the_real_bonsais_trunk_has_a_region_from_the_chosen_view():
     """The trunk, split from the soil in its pot, is thin: a few tenths of a percent of the
     picture from the view chosen for the bonsai. It still gets a region, or nothing keeps

@@ -11,7 +11,9 @@ structure is (:class:`~intuitf.evaluator.metric.MetricJudge`).
 A region is the part of a structure's silhouette where its colour is what shows: where no
 other named structure's silhouette covers it, and where it is the front-most of several and
 the words ask for it solid (it hides the rest). Behind a translucent front part the colour seen
-mixes both, and there no structure gets the pixel (:func:`owned`).
+mixes both, and there no structure gets the pixel (:func:`owned`). Nor does a structure get the
+pixels where a body with another named structure's values lies in front of it: a 1-D TF
+shows that body in the other's colour (the soil in the bonsai's pot, :func:`_unhidden`).
 """
 
 from __future__ import annotations
@@ -72,8 +74,70 @@ def part_regions(intent: Intent, volume, camera, size: tuple[int, int]) -> tuple
         colour = (float(rgb[0]), float(rgb[1]), float(rgb[2]))
         out.append(PartRegion(h.words or h.material, colour, mask, h.opacity))
         voxel_sets.append(voxels)
-    return tuple(r for r in owned(out, voxel_sets, volume.spacing, camera)
-                 if r.mask.mean() >= MIN_SHARE)  # fmt: skip
+    ranges = [smap.by_id(int(h.structure or 0)).value_range for h in hints]
+    lookalikes = _lookalikes(volume.data, ranges, np.any(voxel_sets, axis=0))
+    out = owned(out, voxel_sets, volume.spacing, camera)
+    for k in range(len(out)):
+        # What shows another named structure's colour: its values, outside every named
+        # structure (a structure's own values show its own colour wherever they are).
+        other = np.zeros(volume.data.shape, bool)
+        for j, (lo, hi) in enumerate(ranges):
+            if j != k and out[j].rgb != out[k].rgb:
+                other |= (volume.data >= lo) & (volume.data <= hi)
+        out[k] = _unhidden(out[k], voxel_sets[k], lookalikes & other, volume.spacing, camera)
+    return tuple(r for r in out if r.mask.mean() >= MIN_SHARE)
+
+
+#: Voxels within this many of a structure are its partial-volume rim, not something in
+#: front of it: every surface passes through lower materials' values on its way to the air.
+RIM = 2
+#: A body of look-alike voxels hides a structure's colour when it holds at least this share
+#: of the volume (:func:`_lookalikes`).
+LOOKALIKE_SHARE = 1e-3
+
+
+def _lookalikes(data: np.ndarray, ranges, named: np.ndarray) -> np.ndarray:
+    """Bodies of voxels of no ``named`` structure whose values are in one of ``ranges`` (named
+    structures' values): a 1-D TF gives them that structure's colour. (The bonsai's soil holds
+    the trunk's values: it shows silver inside the pot.)
+
+    Only bodies of at least :data:`LOOKALIKE_SHARE` of the volume count: the bonsai's stray
+    leaf clusters and the rims of its twigs (1,100 pieces, none over 620 voxels) are a sparse
+    veil the trunk shows through, and counted, they took all of its region away.
+    """
+    from scipy import ndimage
+
+    like = np.zeros(data.shape, bool)
+    for lo, hi in ranges:
+        like |= (data >= lo) & (data <= hi)
+    parts, n = ndimage.label(ndimage.binary_opening(like & ~named))
+    if n == 0:
+        return np.zeros(data.shape, bool)
+    sizes = np.bincount(parts.ravel())
+    sizes[0] = 0
+    return (sizes >= LOOKALIKE_SHARE * data.size)[parts]
+
+
+def _unhidden(region: PartRegion, voxels: np.ndarray, lookalikes: np.ndarray, spacing, camera):
+    """``region`` without the pixels where voxels that look like another named structure
+    (:func:`_lookalikes`) lie in front of its structure: there the colour seen is theirs.
+
+    The bonsai's pot region held the soil inside the bowl, which shows the trunk's silver
+    whatever the pot's colour: from the benchmark's view, 300 of its 660 pixels, none of
+    which a brown pot ever made brown. Without them, the offline judge's text score ranks
+    the bonsai's candidates closer to the benchmark's colour errors.
+    """
+    from dataclasses import replace
+
+    from scipy import ndimage
+
+    others = lookalikes & ~ndimage.binary_dilation(voxels, iterations=RIM)
+    if not others.any():
+        return region
+    h, w = region.mask.shape
+    mine = front_depth(voxels, spacing, camera, (w, h))
+    theirs = front_depth(others, spacing, camera, (w, h))
+    return replace(region, mask=region.mask & ~(theirs < mine))
 
 
 def owned(
