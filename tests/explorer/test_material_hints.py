@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -15,7 +16,7 @@ from intuitf.explorer import (
     explorer_from_state,
     mutate,
 )
-from intuitf.explorer.hints import Hint, as_hints, hint_for, hinted_tf
+from intuitf.explorer.hints import Hint, as_hints, hint_for, hinted_tf, keep_shown
 from intuitf.tf import Gaussian, GaussianTF
 from intuitf.tf.defaults import Material
 
@@ -217,6 +218,74 @@ def test_refine_hint_recolours_the_selected_feature():
     for c in pop:  # the unselected feature is frozen and as it was
         g = c.tf.gaussians[0]
         assert g.frozen and (g.mean, g.height, g.color) == (0.3, 0.05, (0.9, 0.3, 0.3))
+
+
+def test_a_named_material_faded_to_nothing_is_raised_to_its_bands_low_end():
+    """The labelling oracle faded the bonsai's pot to a mean opacity of 0.004: only its rim's
+    colour showed. The strongest Gaussian on a named, shown hint, in its colour, keeps at
+    least a share of its band's low end; what is already shown, frozen, hidden, in another
+    colour or an edit's is left alone."""
+    from intuitf.explorer.hints import SHOWN_FLOOR
+
+    b = Bounds()
+    faded = GaussianTF(
+        (
+            Gaussian(0.2, 0.02, 0.001, RED),  # skin, faded
+            Gaussian(0.21, 0.02, 0.004, RED),  # skin too, the stronger of the two
+            Gaussian(0.45, 0.02, 0.0, (0.1, 0.1, 0.9)),  # no hint here
+            Gaussian(0.7, 0.02, 0.5, IVORY),  # bone, shown
+        )
+    )
+    out = keep_shown(faded, (BONE, SKIN), b).gaussians
+    assert out[1].height == pytest.approx(SHOWN_FLOOR * SKIN.height[0])
+    assert out[0].height == 0.001
+    assert out[2:] == faded.gaussians[2:]
+    # Already shown: the same TF back.
+    assert keep_shown(GaussianTF(out), (BONE, SKIN), b) == GaussianTF(out)
+    frozen = faded.with_gaussians(
+        [replace(g, frozen=True) if g.mean < 0.3 else g for g in faded.gaussians]
+    )
+    assert keep_shown(frozen, (BONE, SKIN), b) == frozen
+    hidden = Hint("skin", center=0.2, spread=0.015, hidden=True)
+    fainter = Hint("skin", center=0.2, spread=0.015, height=(0.03, 0.15), direction="fainter")
+    bandless = Hint("skin", center=0.2, spread=0.015, color=RED)
+    for h in (hidden, fainter, bandless):
+        assert keep_shown(faded, (h,), b) == faded
+    # Another colour on the material is not the material shown as asked: left alone.
+    green = faded.with_gaussians(
+        [replace(g, color=(0.1, 0.9, 0.1)) if g.mean < 0.3 else g for g in faded.gaussians]
+    )
+    assert keep_shown(green, (BONE, SKIN), b) == green
+    # A Gaussian counts for the nearest hint: a faded yellow next to a strong blue is raised.
+    blue = Hint("blue", center=0.64, spread=0.008, height=(0.05, 0.8))
+    yellow = Hint("yellow", center=0.68, spread=0.008, height=(0.3, 1.0))
+    near = GaussianTF((Gaussian(0.64, 0.01, 0.6, (0, 0, 1)), Gaussian(0.68, 0.01, 0.02, (1, 1, 0))))
+    assert yellow.reaches(0.66) and blue.reaches(0.66)
+    assert keep_shown(near, (blue, yellow), b).gaussians[1].height == pytest.approx(
+        SHOWN_FLOOR * 0.3
+    )
+
+
+def test_every_new_candidate_shows_the_named_materials():
+    """Over generations of random verdicts, no bred candidate lets a named material, in its
+    colour, fade below its floor (the GA's mutations shrink heights)."""
+    from intuitf.explorer.hints import SHOWN_COLOR_REACH, SHOWN_FLOOR
+
+    ex = GeneticExplorer(population=16, n_gaussians=5, seed=3, histogram=_histogram(), hints=HINTS)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        pop = ex.ask()
+        for c in pop:
+            for h in (BONE, SKIN):
+                on = [
+                    g
+                    for g in c.tf.gaussians
+                    if hint_for(g.mean, (BONE, SKIN)) is h
+                    and np.linalg.norm(np.subtract(g.color, h.color)) <= SHOWN_COLOR_REACH
+                ]
+                floor = SHOWN_FLOOR * h.height[0] - 1e-12
+                assert not on or max(g.height for g in on) >= floor, (c.id, h.name)
+        ex.tell([pop[int(i)].id for i in rng.permutation(len(pop))])
 
 
 @pytest.mark.parametrize("cls", [GeneticExplorer, CMAExplorer])

@@ -12,7 +12,15 @@ from intuitf.explorer.bounds import Bounds
 from intuitf.explorer.candidate import Candidate, candidate_id
 from intuitf.explorer.fitness import rank_fitness
 from intuitf.explorer.genome import is_duplicate_of_any
-from intuitf.explorer.hints import Hint, as_hints, hint_color, hint_for, hinted_tf, quiet_hidden
+from intuitf.explorer.hints import (
+    Hint,
+    as_hints,
+    hint_color,
+    hint_for,
+    hinted_tf,
+    keep_shown,
+    quiet_hidden,
+)
 from intuitf.explorer.operators import MutationParams, mutate
 from intuitf.explorer.population import materials_of, random_tf, seeded_tf
 from intuitf.explorer.stages import STAGES, StagePreset
@@ -294,6 +302,8 @@ class BaseExplorer:
             tf = replace(tf, name=cid, metadata={})
             # What the words hide stays hidden in every candidate (the background: no fog).
             tf = quiet_hidden(tf, self.hints, self.bounds)
+            # ... and what they name and show stays shown (a judge of colours alone may fade it).
+            tf = keep_shown(tf, self.hints, self.bounds)
         return Candidate(cid, tf, self._generation, origin, tuple(parents))
 
     def _color(self, rng: np.random.Generator) -> tuple[float, float, float]:
