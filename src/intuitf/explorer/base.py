@@ -300,10 +300,10 @@ class BaseExplorer:
             # A made TF is named by its candidate id (exports and plots show it); the
             # parent's name and metadata would describe a different TF.
             tf = replace(tf, name=cid, metadata={})
-            # What the words hide stays hidden in every candidate (the background: no fog).
-            tf = quiet_hidden(tf, self.hints, self.bounds)
-            # ... and what they name and show stays shown (a judge of colours alone may fade it).
-            tf = keep_shown(tf, self.hints, self.bounds)
+            # What the words name and show stays shown (a judge of colours alone may fade it),
+            # and what they hide stays hidden (the background: no fog), hiding last: a raised
+            # Gaussian never paints the air.
+            tf = quiet_hidden(keep_shown(tf, self.hints, self.bounds), self.hints, self.bounds)
         return Candidate(cid, tf, self._generation, origin, tuple(parents))
 
     def _color(self, rng: np.random.Generator) -> tuple[float, float, float]:
