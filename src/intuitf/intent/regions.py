@@ -63,7 +63,7 @@ def part_regions(intent: Intent, volume, camera, size: tuple[int, int]) -> tuple
     from intuitf.intent.atlas import upsample_labels
 
     labels = upsample_labels(smap.labels, volume.data.shape)
-    out, voxel_sets = [], []
+    out, voxel_sets, ranges = [], [], []
     for h in hints:
         sid, rgb = int(h.structure or 0), h.rgb or (1.0, 1.0, 1.0)  # both set (filtered)
         # The map's labels are on a coarser grid: a voxel is the structure's where its label
@@ -74,7 +74,7 @@ def part_regions(intent: Intent, volume, camera, size: tuple[int, int]) -> tuple
         colour = (float(rgb[0]), float(rgb[1]), float(rgb[2]))
         out.append(PartRegion(h.words or h.material, colour, mask, h.opacity))
         voxel_sets.append(voxels)
-    ranges = [smap.by_id(int(h.structure or 0)).value_range for h in hints]
+        ranges.append((lo, hi))
     lookalikes = _lookalikes(volume.data, ranges, np.any(voxel_sets, axis=0))
     out = owned(out, voxel_sets, volume.spacing, camera)
     for k in range(len(out)):
@@ -123,9 +123,9 @@ def _unhidden(region: PartRegion, voxels: np.ndarray, lookalikes: np.ndarray, sp
     (:func:`_lookalikes`) lie in front of its structure: there the colour seen is theirs.
 
     The bonsai's pot region held the soil inside the bowl, which shows the trunk's silver
-    whatever the pot's colour: from the benchmark's view, 300 of its 660 pixels, none of
-    which a brown pot ever made brown. Without them, the offline judge's text score ranks
-    the bonsai's candidates closer to the benchmark's colour errors.
+    whatever the pot's colour: from the benchmark's view, 300 of its 660 pixels showed the
+    soil, not the pot. Without them, the offline judge's text score ranks the bonsai's
+    candidates closer to the benchmark's colour errors.
     """
     from dataclasses import replace
 
