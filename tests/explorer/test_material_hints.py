@@ -220,7 +220,7 @@ def test_refine_hint_recolours_the_selected_feature():
         assert g.frozen and (g.mean, g.height, g.color) == (0.3, 0.05, (0.9, 0.3, 0.3))
 
 
-def test_a_named_material_faded_to_nothing_is_raised_to_its_bands_low_end():
+def test_a_named_material_faded_to_nothing_is_raised_to_its_floor():
     """The labelling oracle faded the bonsai's pot to a mean opacity of 0.004: only its rim's
     colour showed. The strongest Gaussian on a named, shown hint, in its colour, keeps at
     least a share of its band's low end; what is already shown, frozen, hidden, in another

@@ -199,9 +199,9 @@ def test_the_session_gives_its_judge_the_regions_of_its_camera(tmp_path):
 def test_soil_with_the_trunks_values_in_front_of_the_pot_is_not_the_pots_region():
     """The bonsai's soil fills the bowl with the trunk's values: a 1-D TF shows it in the
     trunk's colour whatever the pot's is. Seen from above, the pot's region held the soil's
-    top (80 % of the real bonsai's pot region, none of it ever brown), so a judge checking the
-    pot gained little from a brown pot and lost little to silver paint on its wall. The wall
-    stays the pot's; the thin trunk, with leaf specks in front of it, keeps its region."""
+    top (300 of the real bonsai's 660 pot-region pixels from the benchmark's view), where a
+    judge checking the pot's colour saw the trunk's. The wall stays the pot's; the thin trunk,
+    with leaf specks in front of it, keeps its region."""
     from intuitf.intent.regions import front_depth, silhouette
 
     vol = Volume.from_array(potted_tree(soil=True), value_range=(0.0, 1.0))
