@@ -266,6 +266,24 @@ def test_a_named_material_faded_to_nothing_is_raised_to_its_floor():
     )
 
 
+def test_a_gaussian_raised_on_values_the_words_hide_is_switched_off_again():
+    """A faded gold Gaussian at the top of the air's values is nearest the leaves' hint: kept
+    shown first and hidden last, it stays off. (Hidden first, then raised, it painted the
+    air at the floor's height.)"""
+    from intuitf.explorer.hints import as_the_words_say, quiet_hidden
+
+    gold = (0.83, 0.69, 0.22)
+    leaves = Hint("leaves", center=0.17, spread=0.026, color=gold, height=(0.05, 0.8))
+    air = Hint("background", center=0.002, spread=0.05, hidden=True)
+    tf = GaussianTF((Gaussian(0.12, 0.03, 0.001, gold), Gaussian(0.7, 0.02, 0.5, IVORY)))
+    assert hint_for(0.12, (leaves,)) is leaves
+    out = as_the_words_say(tf, (leaves, air), Bounds())
+    assert out.gaussians[0].height == 0.0
+    # The other order paints the air.
+    hidden_first = quiet_hidden(tf, (leaves, air), Bounds())
+    assert keep_shown(hidden_first, (leaves, air), Bounds()).gaussians[0].height > 0.01
+
+
 def test_every_new_candidate_shows_the_named_materials():
     """Over generations of random verdicts, no bred candidate lets a named material, in its
     colour, fade below its floor (the GA's mutations shrink heights)."""

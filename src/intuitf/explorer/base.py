@@ -15,11 +15,10 @@ from intuitf.explorer.genome import is_duplicate_of_any
 from intuitf.explorer.hints import (
     Hint,
     as_hints,
+    as_the_words_say,
     hint_color,
     hint_for,
     hinted_tf,
-    keep_shown,
-    quiet_hidden,
 )
 from intuitf.explorer.operators import MutationParams, mutate
 from intuitf.explorer.population import materials_of, random_tf, seeded_tf
@@ -301,9 +300,8 @@ class BaseExplorer:
             # parent's name and metadata would describe a different TF.
             tf = replace(tf, name=cid, metadata={})
             # What the words name and show stays shown (a judge of colours alone may fade it),
-            # and what they hide stays hidden (the background: no fog), hiding last: a raised
-            # Gaussian never paints the air.
-            tf = quiet_hidden(keep_shown(tf, self.hints, self.bounds), self.hints, self.bounds)
+            # and what they hide stays hidden (the background: no fog).
+            tf = as_the_words_say(tf, self.hints, self.bounds)
         return Candidate(cid, tf, self._generation, origin, tuple(parents))
 
     def _color(self, rng: np.random.Generator) -> tuple[float, float, float]:

@@ -438,3 +438,11 @@ def keep_shown(tf: GaussianTF, hints: Sequence[Hint], bounds: Bounds) -> Gaussia
             gs[i] = replace(gs[i], height=float(floor))
             changed = True
     return tf.with_gaussians(gs) if changed else tf
+
+
+def as_the_words_say(tf: GaussianTF, hints: Sequence[Hint], bounds: Bounds) -> GaussianTF:
+    """``tf`` with what the words name and show kept shown (:func:`keep_shown`) and what they
+    hide kept hidden (:func:`quiet_hidden`), hiding last: a Gaussian raised on values that
+    are also a hidden material's (a faded gold one at the top of the air's values, nearest
+    the leaves) is switched off again, never left to paint the volume's box."""
+    return quiet_hidden(keep_shown(tf, hints, bounds), hints, bounds)
