@@ -63,28 +63,28 @@ def part_regions(intent: Intent, volume, camera, size: tuple[int, int]) -> tuple
     from intuitf.intent.atlas import upsample_labels
 
     labels = upsample_labels(smap.labels, volume.data.shape)
-    out, voxel_sets, ranges = [], [], []
+    out, voxel_sets, in_ranges = [], [], []
     for h in hints:
         sid, rgb = int(h.structure or 0), h.rgb or (1.0, 1.0, 1.0)  # both set (filtered)
         # The map's labels are on a coarser grid: a voxel is the structure's where its label
         # says so and its value is the structure's material (as the atlas shows it).
         lo, hi = smap.by_id(sid).value_range
-        voxels = (labels == sid + 1) & (volume.data >= lo) & (volume.data <= hi)
+        in_range = (volume.data >= lo) & (volume.data <= hi)
+        voxels = (labels == sid + 1) & in_range
         mask = silhouette(voxels, volume.spacing, camera, size)
         colour = (float(rgb[0]), float(rgb[1]), float(rgb[2]))
         out.append(PartRegion(h.words or h.material, colour, mask, h.opacity))
         voxel_sets.append(voxels)
-        ranges.append((lo, hi))
-    lookalikes = _lookalikes(volume.data, ranges, np.any(voxel_sets, axis=0))
+        in_ranges.append(in_range)
+    lookalikes = _lookalikes(in_ranges, np.any(voxel_sets, axis=0))
     out = owned(out, voxel_sets, volume.spacing, camera)
     for k in range(len(out)):
         # What shows another named structure's colour: its values, outside every named
         # structure (a structure's own values show its own colour wherever they are).
-        other = np.zeros(volume.data.shape, bool)
-        for j, (lo, hi) in enumerate(ranges):
-            if j != k and out[j].rgb != out[k].rgb:
-                other |= (volume.data >= lo) & (volume.data <= hi)
-        out[k] = _unhidden(out[k], voxel_sets[k], lookalikes & other, volume.spacing, camera)
+        other = [m for j, m in enumerate(in_ranges) if j != k and out[j].rgb != out[k].rgb]
+        if other:
+            seen = lookalikes & np.any(other, axis=0)
+            out[k] = _unhidden(out[k], voxel_sets[k], seen, volume.spacing, camera)
     return tuple(r for r in out if r.mask.mean() >= MIN_SHARE)
 
 
@@ -96,9 +96,9 @@ RIM = 2
 LOOKALIKE_SHARE = 1e-3
 
 
-def _lookalikes(data: np.ndarray, ranges, named: np.ndarray) -> np.ndarray:
-    """Bodies of voxels of no ``named`` structure whose values are in one of ``ranges`` (named
-    structures' values): a 1-D TF gives them that structure's colour. (The bonsai's soil holds
+def _lookalikes(in_ranges: list[np.ndarray], named: np.ndarray) -> np.ndarray:
+    """Bodies of voxels of no ``named`` structure whose values are in one of ``in_ranges``
+    (masks of named structures' values): a 1-D TF gives them that structure's colour. (The bonsai's soil holds
     the trunk's values: it shows silver inside the pot.)
 
     Only bodies of at least :data:`LOOKALIKE_SHARE` of the volume count: the bonsai's stray
@@ -107,15 +107,12 @@ def _lookalikes(data: np.ndarray, ranges, named: np.ndarray) -> np.ndarray:
     """
     from scipy import ndimage
 
-    like = np.zeros(data.shape, bool)
-    for lo, hi in ranges:
-        like |= (data >= lo) & (data <= hi)
-    parts, n = ndimage.label(ndimage.binary_opening(like & ~named))
+    parts, n = ndimage.label(ndimage.binary_opening(np.any(in_ranges, axis=0) & ~named))
     if n == 0:
-        return np.zeros(data.shape, bool)
+        return np.zeros(named.shape, bool)
     sizes = np.bincount(parts.ravel())
     sizes[0] = 0
-    return (sizes >= LOOKALIKE_SHARE * data.size)[parts]
+    return (sizes >= LOOKALIKE_SHARE * named.size)[parts]
 
 
 def _unhidden(region: PartRegion, voxels: np.ndarray, lookalikes: np.ndarray, spacing, camera):
