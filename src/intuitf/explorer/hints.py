@@ -421,15 +421,12 @@ def keep_shown(tf: GaussianTF, hints: Sequence[Hint], bounds: Bounds) -> Gaussia
     if not shown:
         return tf
     gs = list(tf.gaussians)
+    # A Gaussian counts for the hint whose material it shows, the nearest one, when it shows
+    # it in (about) the hint's colour: another colour there is not what was asked.
+    owner = [None if g.frozen else hint_for(g.mean, shown) for g in gs]
     changed = False
     for h in shown:
-        # A Gaussian counts for the hint whose material it shows, the nearest one, when it
-        # shows it in (about) the hint's colour: another colour there is not what was asked.
-        on = [
-            i
-            for i, g in enumerate(gs)
-            if not g.frozen and hint_for(g.mean, shown) is h and _in_color(g.color, h.color)
-        ]
+        on = [i for i, g in enumerate(gs) if owner[i] is h and _in_color(g.color, h.color)]
         if not on:
             continue
         i = max(on, key=lambda k: gs[k].height)
