@@ -16,7 +16,7 @@ from intuitf.explorer import (
     explorer_from_state,
     mutate,
 )
-from intuitf.explorer.hints import Hint, as_hints, hint_for, hinted_tf, keep_shown
+from intuitf.explorer.hints import STROKE, Hint, as_hints, hint_for, hinted_tf, keep_shown
 from intuitf.tf import Gaussian, GaussianTF
 from intuitf.tf.defaults import Material
 
@@ -152,6 +152,28 @@ def test_first_population_holds_hinted_candidates():
     a = GeneticExplorer(population=12, seed=4, histogram=_histogram())
     b = GeneticExplorer(population=12, seed=4, histogram=_histogram(), hints=())
     assert [c.tf for c in a.ask()] == [c.tf for c in b.ask()]
+
+
+def test_a_sketchs_first_population_is_all_on_its_strokes():
+    """A sketch's strokes say which values take which colour: every fresh candidate of the
+    first population carries each stroke's colour on its values. (Half were histogram seeds
+    with the strokes' colours on materials at random: the tooth's blue root colour on its
+    crown's dentin led the first generation, judged on quality alone.)"""
+    strokes = tuple(replace(h, name=STROKE) for h in (BONE, SKIN))
+    ex = GeneticExplorer(population=20, n_gaussians=5, seed=2, histogram=_histogram(),
+                         hints=strokes)  # fmt: skip
+    pop = ex.ask()
+    assert all(c.origin == "hint" for c in pop)
+    for c in pop:
+        for h in strokes:
+            assert any(
+                h.reaches(g.mean) and np.linalg.norm(np.subtract(g.color, h.color)) < 0.1
+                and g.height >= h.height[0] * 0.99
+                for g in c.tf.gaussians
+            ), (c.id, h.name)  # fmt: skip
+    # Words keep half of it for histogram seeds (their structures are matched guesses).
+    assert not all(c.origin == "hint" for c in GeneticExplorer(
+        population=20, n_gaussians=5, seed=2, histogram=_histogram(), hints=HINTS).ask())  # fmt: skip
 
 
 def test_customize_begins_with_fresh_hinted_tfs_in_place_of_the_bred_tail():

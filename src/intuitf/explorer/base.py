@@ -16,6 +16,7 @@ from intuitf.explorer.hints import (
     Hint,
     as_hints,
     as_the_words_say,
+    from_strokes,
     hint_color,
     hint_for,
     hinted_tf,
@@ -379,7 +380,10 @@ class BaseExplorer:
             before = len(pop)
             pop = self._fill_with_variants(pop, len(pop) + n_var, parents=made)
             made += pop[before:]
-        n_hint = round(self._preset.hint_share * (n - len(made))) if self._hints_placed() else 0
+        share = (
+            self._preset.stroke_hint_share if from_strokes(self.hints) else self._preset.hint_share
+        )
+        n_hint = round(share * (n - len(made))) if self._hints_placed() else 0
         for _ in range(n_hint):
             c = self._unique(self._hinted, "hint", pop)
             pop.append(c)

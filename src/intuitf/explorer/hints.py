@@ -41,6 +41,10 @@ _REACH = 2.5
 _MIN_REACH = 0.03
 
 
+#: The name of a hint made from a sketch's stroke (:mod:`intuitf.intent.strokes`).
+STROKE = "stroke"
+
+
 @dataclass(frozen=True)
 class Hint:
     """One material the intent names: where it is, its colour and its opacity band."""
@@ -145,6 +149,13 @@ def as_hints(hints: Sequence[Hint | Mapping | object]) -> tuple[Hint, ...]:
         else:
             raise ValueError(f"Not a material hint: {h!r}.")
     return tuple(out)
+
+
+def from_strokes(hints: Sequence[Hint]) -> bool:
+    """Whether every hint that shows a material at a place on the values (there is one)
+    comes from a sketch's stroke."""
+    placed = [h for h in hints if h.center is not None and not h.hidden]
+    return bool(placed) and all(h.name == STROKE for h in placed)
 
 
 def hint_for(mean: float, hints: Sequence[Hint]) -> Hint | None:

@@ -54,7 +54,12 @@ class StagePreset:
     :mod:`intuitf.explorer.hints`), ``hint_share`` of a fresh population is placed on them
     and a mutation makes a Gaussian follow its material's hint with ``hint_prob``; when the
     stage begins, ``stage_hint_share`` of the population kept from the stage before is
-    replaced by fresh hinted TFs (see :meth:`Explorer.set_stage`).
+    replaced by fresh hinted TFs (see :meth:`Explorer.set_stage`). When every hint that
+    shows a material comes from a sketch's strokes, ``stroke_hint_share`` is used in place
+    of ``hint_share``: a stroke says which values take its colour, while a histogram seed
+    spreads the strokes' colours over the materials at random (the tooth's blue root colour
+    on its crown's dentin), which the first generation, judged on quality alone, cannot tell
+    from what was drawn.
     ``pair_by_mean``: crossover pairs each
     Gaussian with the other parent's nearest one (else k-th lowest with k-th lowest).
     """
@@ -89,6 +94,7 @@ class StagePreset:
     local_share: Decay = _const(0.25)
     pair_by_mean: bool = True
     hint_share: float = 0.5
+    stroke_hint_share: float = 1.0
     hint_prob: float = 0.1
     stage_hint_share: float = 0.0
 
@@ -266,6 +272,7 @@ def paper_settings() -> dict[str, StagePreset]:
         local_share=_const(0.0),
         pair_by_mean=False,
         hint_share=0.0,
+        stroke_hint_share=0.0,
         hint_prob=0.0,
     )
     customize = replace(
