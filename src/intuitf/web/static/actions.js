@@ -136,7 +136,8 @@ export async function setCurrent(qid, { keepRun = false, follow = null } = {}) {
     if (!cand.qid) cand.qid = qid;
     set({ candidate: cand });
   } catch (err) {
-    showError(err);
+    // A candidate left meanwhile (its run deleted, another one chosen) is no news.
+    if (state.current === qid) showError(err);
   }
 }
 

@@ -237,10 +237,12 @@ async function renameRun(info) {
 
 async function deleteRun(info) {
   if (!window.confirm(`Delete the run ${info.title || info.name}? Its files are moved aside (to .deleted in the runs folder).`)) return;
+  // Leave the run first: what the views still ask of it would come back "no run" once
+  // it is gone. If the deletion fails, the run is still in the history to choose again.
+  if (state.run === info.name) previewVolume(state.volumeId);
   try {
     await api.request("DELETE", `/api/runs/${api.enc(info.name)}`);
     await refreshTree();
-    previewVolume(state.volumeId);
     showMessage(`Deleted ${info.title || info.name}.`, { kind: "ok" });
   } catch (err) {
     showError(err);
