@@ -20,6 +20,7 @@ from intuitf.explorer.hints import (
     hint_color,
     hint_for,
     hinted_tf,
+    placed_hints,
 )
 from intuitf.explorer.operators import MutationParams, mutate
 from intuitf.explorer.population import materials_of, random_tf, seeded_tf
@@ -276,7 +277,7 @@ class BaseExplorer:
     def _hints_placed(self) -> bool:
         """Whether a hint sits somewhere on the values and shows (what hinted TFs are built
         from)."""
-        return any(h.center is not None and not h.hidden for h in self.hints)
+        return bool(placed_hints(self.hints))
 
     def _bring_in_hints(self) -> None:
         n = round(self._preset.stage_hint_share * len(self._population))

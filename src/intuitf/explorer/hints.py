@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -151,10 +151,16 @@ def as_hints(hints: Sequence[Hint | Mapping | object]) -> tuple[Hint, ...]:
     return tuple(out)
 
 
+def placed_hints(hints: Sequence[Hint]) -> list[Hint]:
+    """The hints that show a material at a place on the values (what hinted TFs are built
+    from)."""
+    return [h for h in hints if h.center is not None and not h.hidden]
+
+
 def from_strokes(hints: Sequence[Hint]) -> bool:
     """Whether every hint that shows a material at a place on the values (there is one)
     comes from a sketch's stroke."""
-    placed = [h for h in hints if h.center is not None and not h.hidden]
+    placed = placed_hints(hints)
     return bool(placed) and all(h.name == STROKE for h in placed)
 
 
@@ -205,7 +211,7 @@ def hinted_tf(
     # A hidden material needs no Gaussian (not showing it is the point); it still keeps
     # the leftover Gaussians away and pulls mutations there to height 0.
     avoid = [h for h in hints if h.center is not None]
-    placed = [h for h in avoid if not h.hidden]
+    placed = placed_hints(hints)
     if len(placed) > n_gaussians:
         pick = sorted(int(i) for i in rng.choice(len(placed), size=n_gaussians, replace=False))
         placed = [placed[i] for i in pick]
@@ -305,8 +311,6 @@ def edit_step(g: Gaussian, hint: Hint, rng: np.random.Generator, bounds: Bounds)
     word the height takes a small step. A named colour is taken (slightly varied); "brighter"
     and "darker" move the lightness; otherwise the colour stays as it is.
     """
-    from dataclasses import replace
-
     from intuitf.explorer.bounds import hsl_to_rgb, rgb_to_hsl
 
     h = g.height
@@ -360,8 +364,6 @@ def quiet_hidden(tf: GaussianTF, hints: Sequence[Hint], bounds: Bounds) -> Gauss
     allow. Over a material as common as air, even a faint Gaussian is a fog over the whole
     volume box.
     """
-    from dataclasses import replace
-
     hidden = [h for h in hints if h.hidden and h.center is not None]
     if not hidden:
         return tf
@@ -425,8 +427,6 @@ def keep_shown(tf: GaussianTF, hints: Sequence[Hint], bounds: Bounds) -> Gaussia
     away), and a hint no free Gaussian reaches; a Gaussian counts for the nearest hint it
     reaches (:func:`hint_for`).
     """
-    from dataclasses import replace
-
     shown = [h for h in hints if h.center is not None and h.height is not None]
     shown = [h for h in shown if not h.hidden and h.direction is None]
     if not shown:
