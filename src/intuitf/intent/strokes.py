@@ -56,9 +56,13 @@ SEE_THROUGH = (0.03, 0.25)
 #: Gaussian heights of the material seen through a translucent one: strong, since what shows
 #: of it is what the layer in front lets through. (Drawn from the visible range, the tooth's
 #: yellow dentin was mostly too faint to show through the red enamel, and searches seldom
-#: found the strong dentin the sketch needs. Drawn from 0.3 up, the first generation's
-#: crown middle was ΔE2000 16.9 from its yellow stroke, mean of 12 seeds; from 0.6 up, 10.7:
-#: benchmarks/intent_cases.py --cases tooth-sketch.)
+#: found the strong dentin the sketch needs. It is a trade: the dentin's values are also
+#: those the enamel's surface passes through, so the stronger the dentin, the more yellow
+#: specks on the red crown top. First generation's crown top / middle / root, ΔE2000 from
+#: their strokes' colours, mean of 12 seeds with the metric judge
+#: (benchmarks/intent_cases.py --cases tooth-sketch): from 0.1 to 0.4, 4.5 / 37.1 / 5.4;
+#: from 0.3 up, 17.8 / 15.2 / 10.1; from 0.6 up, 23.1 / 11.3 / 7.9, and after six
+#: generations 16.2 / 14.8 / 3.5, the most even of the three.)
 SEEN_BEHIND = (0.6, 1.0)
 
 
