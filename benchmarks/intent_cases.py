@@ -144,8 +144,8 @@ def labels_for(name: str, d: np.ndarray) -> tuple[np.ndarray, dict[str, int], np
     # the structure's: the bonsai pot's outer face has the soil's and branch's values, the
     # tooth's enamel the dentin's. They are that structure's surface (what a TF colours
     # there is seen on it), not the lower material their value names: the densest claims
-    # them first, and keeps them (a less dense structure claimed them back once: the
-    # crown middle took the crown top's shell back from it).
+    # them first, and keeps them: a less dense structure may not claim them back (the crown
+    # middle took the crown top's shell back while it could).
     #
     # The rim is as deep as the ramp from the air's values to the structure's: one voxel, but
     # three on the tooth, whose enamel meets the air across 2-3 voxels (0.41 to 0.77). With one
