@@ -267,6 +267,12 @@ def register(app: typer.Typer) -> None:
             help="Seed the first population, and steer colour and opacity mutations, from the "
             "materials --text names (e.g. 'opaque ivory bone': ivory, opaque, on the bone).",
         ),
+        fit_sketch: bool = typer.Option(
+            True,
+            "--fit-sketch/--no-fit-sketch",
+            help="With --sketch: fit a TF to the strokes first (a few seconds); it joins the "
+            "first generation, and the run judges against the strokes from the start.",
+        ),
         azimuth: float = typer.Option(
             None, "--azimuth", help="Judging view (default 30, or the --on picture's camera)."
         ),
@@ -348,6 +354,7 @@ def register(app: typer.Typer) -> None:
                 output_size=output_size, top_k=top, shading=shading,
                 camera={} if view.default else view.camera,
                 palette_hint=palette, material_hints=hints, device=device,
+                fit_sketch=fit_sketch,
             )  # fmt: skip
             intent = _intent_spec(text, image, sketch, on, about)
             initial = [load_tf(p).to_dict() for p in start_from or []]

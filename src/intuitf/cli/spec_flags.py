@@ -23,6 +23,7 @@ FLAGS: dict[str, str] = {
     "settings.shading": "--shading/--no-shading",
     "settings.palette_hint": "--palette/--no-palette",
     "settings.material_hints": "--hints/--no-hints",
+    "settings.fit_sketch": "--fit-sketch/--no-fit-sketch",
     "settings.device": "--device",
     "settings.camera": "--azimuth/--elevation",
     "judge.spec": "--evaluator",

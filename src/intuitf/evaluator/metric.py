@@ -514,6 +514,16 @@ class MetricJudge:
         is nearer blue than yellow is, and a blue stroke on a root that shares its values
         with a yellow-stroked crown was met by making the root vanish.)
         """
+        per = self._stroke_errors(f, intent)
+        return None if per is None else -float(per.mean())
+
+    def stroke_errors(self, image: np.ndarray, intent: Intent) -> np.ndarray | None:
+        """Each stroke's mean ΔE in ``image`` (the strokes as
+        :func:`intuitf.intent.strokes.strokes_of` groups them), as :meth:`score` measures
+        them for ``stroke_color_agreement``; None when ``intent`` has no strokes."""
+        return self._stroke_errors(self.features(image), intent)
+
+    def _stroke_errors(self, f: _Features, intent: Intent) -> np.ndarray | None:
         mask, stroke_rgb = _strokes(intent, f.lab.shape[:2])
         if mask is None or not mask.any():
             return None
@@ -525,7 +535,7 @@ class MetricJudge:
         which = _stroke_ids(intent, f.lab.shape[:2])[mask]
         counts = np.bincount(which)
         per = np.bincount(which, weights=de[mask]) / np.maximum(counts, 1)
-        return -float(per[counts > 0].mean())
+        return per[counts > 0]
 
     def _preserve(self, f: _Features, intent: Intent) -> float | None:
         if intent.base is None:

@@ -24,20 +24,68 @@ def _palette_hint(intent: Intent, settings: RunSettings) -> list[tuple[float, fl
 
 def _read_intent(
     intent: Intent, settings: RunSettings, volume: Volume
-) -> tuple[list[dict], list[str]]:
-    """The Explorer's hints for the intent on the volume and how it was read, in lines a
-    person can check (:func:`intuitf.intent.readback.read_back`), from one reading of it (a
-    sketch's rays cast once); neither when the run does not use them (``material_hints``
-    off)."""
+) -> tuple[list[dict], list[str], Any]:
+    """The Explorer's hints for the intent on the volume, how it was read, in lines a
+    person can check (:func:`intuitf.intent.readback.read_back`), and the reading itself
+    (:class:`intuitf.intent.hints.IntentReading`), from one reading of it (a sketch's rays
+    cast once); none of them when the run does not use them (``material_hints`` off)."""
     if not getattr(settings, "material_hints", True):
-        return [], []
+        return [], [], None
     from intuitf.intent.hints import explorer_hints, read_intent
     from intuitf.intent.readback import read_back
 
     camera = settings.camera or None
     reading = read_intent(intent, volume, camera=camera)
     return (explorer_hints(intent, volume, camera=camera, reading=reading),
-            read_back(intent, volume, camera=camera, reading=reading))  # fmt: skip
+            read_back(intent, volume, camera=camera, reading=reading), reading)  # fmt: skip
+
+
+#: Largest picture (pixels a side) a sketch is fitted on: the strokes' colours, not detail.
+SKETCH_FIT_SIZE = 128
+
+
+def _fit_sketch(intent: Intent, settings: RunSettings, volume: Volume, reading: Any) -> Any:
+    """A TF fitted to the sketch's strokes (:func:`intuitf.intent.sketch_fit.fit_sketch`) on
+    the judging camera's picture, measured as the offline judge measures strokes; None when
+    the intent is no sketch, nothing was read of it, or the fit did no better than the
+    strokes' hints."""
+    if (
+        intent.kind != "sketch"
+        or not getattr(settings, "fit_sketch", True)
+        or reading is None
+        or not reading.strokes
+        or not settings.camera
+    ):
+        return None
+    from intuitf.evaluator.metric import MetricJudge
+    from intuitf.intent.sketch_fit import fit_sketch
+    from intuitf.render import Camera, VolumeRenderer
+
+    renderer = VolumeRenderer(
+        volume,
+        size=min(int(settings.image_size), SKETCH_FIT_SIZE),
+        shading=settings.shading,
+        background=tuple(settings.background),
+        device=settings.device,
+    )
+    view = renderer.sample_cache(Camera.from_dict(settings.camera))
+    judge = MetricJudge(cache_size=4)
+    fit = fit_sketch(
+        reading.strokes, lambda tf: judge.stroke_errors(view.render(tf), intent),
+        seed=settings.seed,
+    )  # fmt: skip
+    return fit if fit is not None and fit.improved else None
+
+
+def _fit_line(fit: Any) -> str:
+    """The read-back line that says what the fit did."""
+    before = ", ".join(f"{v:.0f}" for v in fit.before)
+    after = ", ".join(f"{v:.0f}" for v in fit.after)
+    return (
+        "A transfer function fitted to the strokes joins the first generation (each stroke's"
+        f" colour error, ΔE: {before} before the fit, {after} after); the run starts at the"
+        " sketch."
+    )
 
 
 def _with_selection(

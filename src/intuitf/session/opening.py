@@ -18,6 +18,8 @@ from intuitf.errors import SessionError
 from intuitf.evaluator.types import Cost, Intent, Judge
 from intuitf.session.events import EventLog
 from intuitf.session.helpers import (
+    _fit_line,
+    _fit_sketch,
     _intent_record,
     _judge_name,
     _paid,
@@ -160,7 +162,6 @@ def _new(
     from intuitf.explorer import make_explorer
 
     settings.validate()
-    plan = settings.stage_plan(intent.kind != "none")
     if rd is not None:
         from intuitf.evaluator.budget import reset_spend
 
@@ -169,7 +170,13 @@ def _new(
     # the intent that the first generation's hints are made from match them by name.
     naming = _name_structures(volume, judge, settings)
     counts, _ = volume.histogram()
-    hints, understood = _read_intent(intent, settings, volume)
+    hints, understood, reading = _read_intent(intent, settings, volume)
+    # A sketch's strokes are fitted first: the fitted TF joins the first generation, and the
+    # run judges against the strokes from there on (see ``RunSettings.fit_sketch``).
+    fitted = _fit_sketch(intent, settings, volume, reading)
+    if fitted is not None:
+        understood = [*understood, _fit_line(fitted)]
+    plan = settings.stage_plan(intent.kind != "none", at_intent=fitted is not None)
     explorer = make_explorer(
         settings.explorer,
         population=settings.population,
@@ -179,7 +186,7 @@ def _new(
         seed=settings.seed,
         histogram=counts,
         value_range=volume.value_range,
-        initial=list(initial),
+        initial=list(initial) + ([fitted.tf] if fitted is not None else []),
         palette=_palette_hint(intent, settings),
         hints=hints,
     )
@@ -214,6 +221,7 @@ def _new(
                 "versions": _versions(),
                 "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
                 **({"structures": naming.to_dict()} if naming is not None else {}),
+                **({"sketch_fit": _fit_record(fitted)} if fitted is not None else {}),
                 "understood": understood,
             }
         )
@@ -228,10 +236,17 @@ def _new(
         spec=spec,
         lock=lock,
         cost=Cost(**naming.cost.to_dict()) if naming is not None else None,
+        plan=plan,
     )
     sess.understood = understood
     sess.events.emit("stage_started", stage=plan[0][0], generations=plan[0][1], generation=0)
     return sess
+
+
+def _fit_record(fit: Any) -> dict:
+    """What run.json keeps of a sketch's fit: the TF and the strokes' errors."""
+    return {"tf": fit.tf.to_dict(), "before": list(fit.before), "after": list(fit.after),
+            "evaluations": fit.evaluations}  # fmt: skip
 
 
 def refine_session(

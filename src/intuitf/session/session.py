@@ -775,7 +775,7 @@ class Session:
                 self.explorer.palette = _palette(palette)
             # The new words name their own materials, and the person is told how they were
             # read, as at the opening.
-            hints, self.understood = _read_intent(intent, self.settings, self.volume)
+            hints, self.understood, _ = _read_intent(intent, self.settings, self.volume)
             if hasattr(self.explorer, "hints"):
                 from intuitf.explorer.hints import as_hints
 

@@ -47,6 +47,12 @@ class RunSettings:
     #: structures by their descriptors only. Opt-in while the names' gain over descriptors
     #: is unmeasured with a real model: every run would pay one more request for it.
     name_structures: bool = False
+    #: A sketch's first generation holds a TF fitted to its strokes
+    #: (:mod:`intuitf.intent.sketch_fit`, a few seconds of rendering), and the run goes
+    #: straight to the strokes (``customize``): the sketch is drawn over a picture the person
+    #: already has, and a quality-only first stage ranked the fitted TF by quality alone and
+    #: lost it. Needs ``material_hints`` and a camera (the base picture's).
+    fit_sketch: bool = True
 
     def validate(self) -> None:
         if not 4 <= self.population <= 1000:
@@ -64,10 +70,13 @@ class RunSettings:
         if self.device not in ("auto", "cpu", "cuda"):
             raise SessionError(f"--device must be auto, cpu or cuda, got {self.device!r}.")
 
-    def stage_plan(self, has_intent: bool) -> list[tuple[str, int]]:
-        """The (stage, generations) list this run follows."""
+    def stage_plan(self, has_intent: bool, at_intent: bool = False) -> list[tuple[str, int]]:
+        """The (stage, generations) list this run follows; ``at_intent``: the run starts at
+        the intent (a sketch fitted in its first generation), with no quality-only stage."""
         if self.stages:
             return [(str(s), int(n)) for s, n in self.stages]
+        if has_intent and at_intent:
+            return [("customize", self.generations)]
         if not has_intent or self.generations < 2:
             return [("initialize", self.generations)]
         n_init = max(1, round(self.generations * self.init_share))

@@ -86,6 +86,7 @@ class SettingsSchema(BaseModel):
     device: Literal["auto", "cpu", "cuda"] = "auto"
     material_hints: StrictBool = True
     name_structures: StrictBool = False
+    fit_sketch: StrictBool = True
 
     @field_validator("camera")
     @classmethod

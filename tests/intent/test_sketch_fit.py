@@ -1,0 +1,74 @@
+"""A sketch's strokes are fitted: the first generation holds a TF that shows them."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from helpers.strokes import sketch_over, two_blocks
+from intuitf.evaluator.metric import MetricJudge
+from intuitf.evaluator.types import Intent
+from intuitf.intent.sketch_fit import fit_sketch
+from intuitf.intent.strokes import StrokeHint
+from intuitf.render import Camera, VolumeRenderer
+from intuitf.session import RunDirectory, Session
+from intuitf.session.settings import RunSettings
+from intuitf.tf import Gaussian, GaussianTF
+
+CAM = Camera(azimuth=0.0, elevation=0.0)  # the 0.4 block on the left, the 0.8 on the right
+RED, BLUE = (220 / 255, 30 / 255, 30 / 255), (40 / 255, 80 / 255, 220 / 255)
+
+
+def _sketch_intent(vol, size: int = 64) -> Intent:
+    base_tf = GaussianTF((Gaussian(0.4, 0.03, 0.8, (1, 1, 1)), Gaussian(0.8, 0.03, 0.8, (1, 1, 1))))
+    base = VolumeRenderer(vol, size=size).render(base_tf, CAM)
+    return Intent(kind="sketch", sketch=sketch_over(vol, CAM, size), base=base)
+
+
+def test_the_fit_moves_a_stroke_gaussian_onto_the_values_that_show_it():
+    vol = two_blocks()
+    intent = _sketch_intent(vol)
+    view = VolumeRenderer(vol, size=64).sample_cache(CAM)
+    judge = MetricJudge()
+    # The red stroke's hint placed off its block's value (0.40), and too narrow to reach it:
+    # the left block shows nothing, its stroke's error is the worst there is.
+    strokes = [
+        StrokeHint(RED, 100, 0.33, 0.01, 1.0, (0.05, 0.8)),
+        StrokeHint(BLUE, 100, 0.80, 0.02, 1.0, (0.05, 0.8)),
+    ]
+    fit = fit_sketch(strokes, lambda tf: judge.stroke_errors(view.render(tf), intent), seed=0)
+    assert fit is not None and fit.improved
+    assert max(fit.before) > 100  # the red block hidden
+    assert max(fit.after) < 20, fit.after
+    red = next(g for g in fit.tf.gaussians if g.color[0] > 0.8)
+    # Its Gaussian now reaches the 0.4 block (within two widths), in the stroke's colour.
+    assert abs(red.mean - 0.4) < 2 * red.width + 0.01, red
+    assert red.color == RED
+
+
+def test_nothing_to_fit_gives_no_fit():
+    assert fit_sketch([], lambda tf: np.array([1.0])) is None
+    hint = StrokeHint(RED, 10, 0.4, 0.02, 1.0)
+    assert fit_sketch([hint], lambda tf: None) is None
+
+
+SMALL = dict(population=6, generations=2, image_size=48, output_size=48, top_k=1)
+
+
+def test_a_sketch_run_starts_at_the_strokes_with_the_fitted_tf_in_its_first_generation(tmp_path):
+    vol = two_blocks()
+    intent = _sketch_intent(vol, 48)
+    settings = RunSettings(**SMALL, camera=CAM.to_dict())
+    with Session.create(vol, intent=intent, settings=settings, run_dir=tmp_path / "run") as s:
+        assert s.plan == [("customize", 2)]  # no quality-only stage before the strokes
+        first = s.explorer.ask()
+        assert any(c.tf.name == "fitted to the sketch" for c in first)
+        assert any("fitted to the strokes" in line for line in s.understood)
+    record = RunDirectory(tmp_path / "run").read_run()
+    fit = record["sketch_fit"]
+    assert max(fit["after"]) <= max(fit["before"])
+    assert record["plan"] == [["customize", 2]]
+    # Without the fit the run keeps its quality-only first stage and no fitted TF.
+    off = RunSettings(**SMALL, camera=CAM.to_dict(), fit_sketch=False)
+    with Session.create(vol, intent=intent, settings=off) as s:
+        assert s.plan[0][0] == "initialize"
+        assert not any(c.tf.name == "fitted to the sketch" for c in s.explorer.ask())
