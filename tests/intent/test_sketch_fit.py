@@ -72,3 +72,16 @@ def test_a_sketch_run_starts_at_the_strokes_with_the_fitted_tf_in_its_first_gene
     with Session.create(vol, intent=intent, settings=off) as s:
         assert s.plan[0][0] == "initialize"
         assert not any(c.tf.name == "fitted to the sketch" for c in s.explorer.ask())
+
+
+def test_a_sketch_asked_during_a_run_brings_its_fitted_tf_into_the_population():
+    vol = two_blocks()
+    intent = _sketch_intent(vol, 48)
+    settings = RunSettings(**SMALL, camera=CAM.to_dict())
+    with Session.create(vol, settings=settings) as s:
+        s.step()
+        s.query(intent, generations=1)
+        population = s.explorer.ask()
+        assert any(c.tf.name == "fitted to the sketch" for c in population)
+        assert any("joins the population" in line for line in s.understood)
+        s.step()  # the fitted TF is rendered and judged like any candidate

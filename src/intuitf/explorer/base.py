@@ -238,6 +238,7 @@ class BaseExplorer:
         generations: int | None = None,
         selected: Sequence[int] = (),
         base: GaussianTF | None = None,
+        joining: Sequence[GaussianTF] = (),
     ) -> None:
         """Move to another stage, keeping the population; the stage's progress restarts.
 
@@ -245,7 +246,8 @@ class BaseExplorer:
         every individual; with ``base`` the population is rebuilt around that TF instead
         (it, as-is but frozen, plus variants of its selected Gaussians). Other stages
         unfreeze everything, and with material hints replace the population's last
-        ``stage_hint_share`` (bred by roulette, not elites) by fresh hinted TFs.
+        ``stage_hint_share`` (bred by roulette, not elites) by fresh hinted TFs; ``joining``
+        TFs (a sketch's fitted TF) then take the last places as they are.
         """
         preset = self._resolve(stage)
         if generations is not None and int(generations) < 1:
@@ -273,6 +275,11 @@ class BaseExplorer:
         else:
             self._population = [self._retf(c, c.tf.unfreeze()) for c in self._population]
             self._bring_in_hints()
+            joining = list(joining)[: len(self._population)]
+            if joining:
+                self.bounds = self.bounds.covering(joining)
+                kept = self._population[: len(self._population) - len(joining)]
+                self._population = kept + [self._new(tf, "initial") for tf in joining]
 
     def _hints_placed(self) -> bool:
         """Whether a hint sits somewhere on the values and shows (what hinted TFs are built

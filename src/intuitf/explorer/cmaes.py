@@ -153,10 +153,13 @@ class CMAExplorer(BaseExplorer):
         generations: int | None = None,
         selected: Sequence[int] = (),
         base: GaussianTF | None = None,
+        joining: Sequence[GaussianTF] = (),
     ) -> None:
         """Restart CMA-ES for another stage around ``base`` (default: the best TF so far).
 
         A freezing stage encodes only the ``selected`` Gaussians; the rest stay fixed.
+        ``joining`` TFs are not taken: a CMA-ES population is drawn from one distribution
+        around its start, and a TF of another size cannot join it as it is.
         """
         preset = self._resolve(stage)
         if generations is not None and int(generations) < 1:

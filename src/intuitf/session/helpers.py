@@ -77,15 +77,16 @@ def _fit_sketch(intent: Intent, settings: RunSettings, volume: Volume, reading: 
     return fit if fit is not None and fit.improved else None
 
 
-def _fit_line(fit: Any) -> str:
+def _fit_line(fit: Any, *, opening: bool = True) -> str:
     """The read-back line that says what the fit did."""
     before = ", ".join(f"{v:.0f}" for v in fit.before)
     after = ", ".join(f"{v:.0f}" for v in fit.after)
-    return (
-        "A transfer function fitted to the strokes joins the first generation (each stroke's"
-        f" colour error, ΔE: {before} before the fit, {after} after); the run starts at the"
-        " sketch."
+    where = "the first generation" if opening else "the population"
+    line = (
+        f"A transfer function fitted to the strokes joins {where} (each stroke's colour"
+        f" error, ΔE: {before} before the fit, {after} after)"
     )
+    return line + ("; the run judges against the strokes from the start." if opening else ".")
 
 
 def _with_selection(

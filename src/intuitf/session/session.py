@@ -54,6 +54,8 @@ from intuitf.evaluator.types import Aspect, Cost, Intent, Judge
 from intuitf.session import opening
 from intuitf.session.events import EventLog
 from intuitf.session.helpers import (
+    _fit_line,
+    _fit_sketch,
     _intent_record,
     _judge_name,
     _paid,
@@ -775,12 +777,17 @@ class Session:
                 self.explorer.palette = _palette(palette)
             # The new words name their own materials, and the person is told how they were
             # read, as at the opening.
-            hints, self.understood, _ = _read_intent(intent, self.settings, self.volume)
+            hints, self.understood, reading = _read_intent(intent, self.settings, self.volume)
             if hasattr(self.explorer, "hints"):
                 from intuitf.explorer.hints import as_hints
 
                 self.explorer.hints = as_hints(hints)
-            self.explorer.set_stage("customize", generations=n)
+            # A sketch asked now is fitted as at an opening: its TF joins the population.
+            fitted = _fit_sketch(intent, self.settings, self.volume, reading)
+            if fitted is not None:
+                self.understood = [*self.understood, _fit_line(fitted, opening=False)]
+            joining = [fitted.tf] if fitted is not None else []
+            self.explorer.set_stage("customize", generations=n, joining=joining)
             record = {"type": "query", "generation": self.generation, "intent": _intent_record(intent), "pictures": pictures, "understood": self.understood}  # fmt: skip
             self._journal(record)
             self._journal({"type": "stage", "generation": self.generation, "stage": "customize"})
