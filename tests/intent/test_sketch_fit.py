@@ -62,7 +62,8 @@ def test_a_sketch_run_starts_at_the_strokes_with_the_fitted_tf_in_its_first_gene
         assert s.plan == [("customize", 2)]  # no quality-only stage before the strokes
         first = s.explorer.ask()
         assert any(c.tf.name == "fitted to the sketch" for c in first)
-        assert any("fitted to the strokes" in line for line in s.understood)
+        line = next(x for x in s.understood if "fitted to the strokes" in x)
+        assert "red " in line and "blue " in line  # each stroke by its colour, before → after
     record = RunDirectory(tmp_path / "run").read_run()
     fit = record["sketch_fit"]
     assert max(fit["after"]) <= max(fit["before"])

@@ -77,14 +77,22 @@ def _fit_sketch(intent: Intent, settings: RunSettings, volume: Volume, reading: 
     return fit if fit is not None and fit.improved else None
 
 
-def _fit_line(fit: Any, *, opening: bool = True) -> str:
-    """The read-back line that says what the fit did."""
-    before = ", ".join(f"{v:.0f}" for v in fit.before)
-    after = ", ".join(f"{v:.0f}" for v in fit.after)
+def _fit_line(fit: Any, intent: Intent, *, opening: bool = True) -> str:
+    """The read-back line that says what the fit did, stroke by stroke."""
+    from intuitf.intent.colours import colour_word
+    from intuitf.intent.strokes import strokes_of
+
+    strokes = strokes_of(intent.sketch, min_pixels=1) if intent.sketch is not None else []
+    names = [colour_word(tuple(c / 255.0 for c in rgb)) for rgb, _ in strokes]
+    if len(names) != len(fit.before):  # a stroke too small to measure: no names
+        names = [f"stroke {k + 1}" for k in range(len(fit.before))]
+    changes = ", ".join(
+        f"{n} {b:.0f} → {a:.0f}" for n, b, a in zip(names, fit.before, fit.after, strict=True)
+    )
     where = "the first generation" if opening else "the population"
     line = (
         f"A transfer function fitted to the strokes joins {where} (each stroke's colour"
-        f" error, ΔE: {before} before the fit, {after} after)"
+        f" error as ΔE, the worst lowered first: {changes})"
     )
     return line + ("; the run judges against the strokes from the start." if opening else ".")
 

@@ -175,7 +175,7 @@ def _new(
     # run judges against the strokes from there on (see ``RunSettings.fit_sketch``).
     fitted = _fit_sketch(intent, settings, volume, reading)
     if fitted is not None:
-        understood = [*understood, _fit_line(fitted)]
+        understood = [*understood, _fit_line(fitted, intent)]
     plan = settings.stage_plan(intent.kind != "none", at_intent=fitted is not None)
     explorer = make_explorer(
         settings.explorer,

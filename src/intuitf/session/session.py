@@ -785,7 +785,7 @@ class Session:
             # A sketch asked now is fitted as at an opening: its TF joins the population.
             fitted = _fit_sketch(intent, self.settings, self.volume, reading)
             if fitted is not None:
-                self.understood = [*self.understood, _fit_line(fitted, opening=False)]
+                self.understood = [*self.understood, _fit_line(fitted, intent, opening=False)]
             joining = [fitted.tf] if fitted is not None else []
             self.explorer.set_stage("customize", generations=n, joining=joining)
             record = {"type": "query", "generation": self.generation, "intent": _intent_record(intent), "pictures": pictures, "understood": self.understood}  # fmt: skip
