@@ -62,7 +62,8 @@ SEE_THROUGH = (0.03, 0.25)
 #: their strokes' colours, mean of 12 seeds with the metric judge
 #: (benchmarks/intent_cases.py --cases tooth-sketch): from 0.1 to 0.4, 4.5 / 37.1 / 5.4;
 #: from 0.3 up, 17.8 / 15.2 / 10.1; from 0.6 up, 23.1 / 11.3 / 7.9, and after six
-#: generations 16.2 / 14.8 / 3.5, the most even of the three.)
+#: generations 16.2 / 14.8 / 3.5, the most even of the three. These are the hints alone: the
+#: run's fitted TF (:mod:`intuitf.intent.sketch_fit`) starts from them and sets the heights.)
 SEEN_BEHIND = (0.6, 1.0)
 
 
