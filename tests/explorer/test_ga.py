@@ -194,6 +194,22 @@ def test_customize_keeps_structure_and_colours(target_tf):
     assert [c.to_dict() for c in ex.ask()] == [c.to_dict() for c in before]
 
 
+def test_tfs_joining_a_stage_take_the_last_places_as_they_are(target_tf):
+    lut = target_tf.lut(64)
+    ex = GeneticExplorer(population=8, n_gaussians=4, generations=2, seed=8)
+    _run(ex, lut, 2)
+    before = ex.ask()
+    fitted = GaussianTF((Gaussian(0.97, 0.01, 0.9, (1.0, 0.0, 0.0)),), name="fitted")
+    ex.set_stage("customize", generations=3, joining=[fitted])
+    after = ex.ask()
+    assert len(after) == 8
+    assert _ids(after[:7]) == _ids(before[:7])  # the elites stay first
+    assert after[-1].tf == fitted and after[-1].origin == "initial"
+    assert after[-1].id not in _ids(before)
+    # It is bred like any candidate from then on.
+    _run(ex, lut, 1)
+
+
 def test_candidate_round_trip():
     ex = GeneticExplorer(population=4, n_gaussians=2, seed=0)
     c = ex.ask()[0]
