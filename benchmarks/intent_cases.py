@@ -553,13 +553,17 @@ class LabelOracle(OracleJudge):
 
 
 def label_oracle(scene: Scene, asked: dict[str, tuple], noise: float, seed: int) -> LabelOracle:
-    """The labelling oracle of a case: the named structures' mean ΔE, 20 for each look the
-    words do not get, and the haze (a share, times 200), the less the better."""
+    """The labelling oracle of a case: the named structures' worst ΔE plus 0.3 of their mean,
+    20 for each look the words do not get, and the haze (a share, times 200), the less the
+    better. Worst first, as a person reads "a brown pot, silver branch and golden leaves":
+    scored by the mean, the oracle took a clean pot for leaves gone grey (one bonsai seed of
+    12 ended with leaves at ΔE2000 23.2, pot 1.0)."""
 
     def score(tf) -> float:
         m = measure(scene, tf, asked)
         s = m["structures"].values()
-        return (-float(np.mean([x["dE"] for x in s])) - 20.0 * sum(not x["opacity_ok"] for x in s)
+        de = [x["dE"] for x in s]
+        return (-float(np.max(de) + 0.3 * np.mean(de)) - 20.0 * sum(not x["opacity_ok"] for x in s)
                 - 200.0 * m["haze"])  # fmt: skip
 
     return LabelOracle(score, noise, seed)
