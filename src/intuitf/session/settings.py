@@ -14,7 +14,8 @@ class RunSettings:
     ``stages`` is the plan: a list of (stage name, generations). By default a run with an
     intent spends about a third of its generations in ``initialize`` (quality only, to find
     the volume's structures) and the rest in ``customize`` (the intent); a run without an
-    intent stays in ``initialize``.
+    intent stays in ``initialize``, and a sketch fitted to its strokes (``fit_sketch``) goes
+    straight to ``customize``.
 
     ``palette_hint``: draw part of the new colours from those the intent asks for (the
     reference picture's dominant colours, the sketch's strokes, the colour words of the text).
