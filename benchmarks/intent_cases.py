@@ -499,11 +499,7 @@ def direct_tf(scene: Scene, asked: dict[str, tuple], iterations: int, seed: int)
         return GaussianTF(tuple(sorted(gs, key=lambda g: g.mean)))
 
     def cost(x: np.ndarray) -> float:
-        m = measure(scene, decode(x), asked)["structures"]
-        de = [v["dE"] for v in m.values()]
-        return (
-            max(de) + 0.3 * float(np.mean(de)) + 20.0 * sum(not v["opacity_ok"] for v in m.values())
-        )
+        return _worst_first(measure(scene, decode(x), asked)["structures"])
 
     x0 = np.array([v for g in start.gaussians for v in (10 * g.mean, np.log(g.width),
                    np.log(max(g.height, 1e-3)), *(2 * c for c in g.color))])  # fmt: skip
@@ -561,12 +557,19 @@ def label_oracle(scene: Scene, asked: dict[str, tuple], noise: float, seed: int)
 
     def score(tf) -> float:
         m = measure(scene, tf, asked)
-        s = m["structures"].values()
-        de = [x["dE"] for x in s]
-        return (-float(np.max(de) + 0.3 * np.mean(de)) - 20.0 * sum(not x["opacity_ok"] for x in s)
-                - 200.0 * m["haze"])  # fmt: skip
+        return -_worst_first(m["structures"]) - 200.0 * m["haze"]
 
     return LabelOracle(score, noise, seed)
+
+
+def _worst_first(structures: dict) -> float:
+    """The named structures' worst ΔE plus 0.3 of their mean, and 20 for each whose opacity
+    disagrees with the words (the less the better): what the direct search and the oracle
+    go by."""
+    de = [x["dE"] for x in structures.values()]
+    return float(max(de) + 0.3 * np.mean(de)) + 20.0 * sum(
+        not x["opacity_ok"] for x in structures.values()
+    )
 
 
 # -- cases ---------------------------------------------------------------------------------------

@@ -17,9 +17,13 @@ def two_blocks() -> Volume:
     return Volume.from_array(d, value_range=(0.0, 1.0))
 
 
+#: Both blocks shown white: the picture the strokes are drawn over.
+BLOCKS_TF = GaussianTF((Gaussian(0.4, 0.03, 0.8, (1, 1, 1)), Gaussian(0.8, 0.03, 0.8, (1, 1, 1))))
+
+
 def sketch_over(vol: Volume, cam: Camera, size: int = 64) -> np.ndarray:
     """Red strokes over the left block's pixels, blue over the right one's, as seen from cam."""
-    tf = GaussianTF((Gaussian(0.4, 0.03, 0.8, (1, 1, 1)), Gaussian(0.8, 0.03, 0.8, (1, 1, 1))))
+    tf = BLOCKS_TF
     r = VolumeRenderer(vol, size=size, shading=False)
     left = r.render_rgba(GaussianTF((tf.gaussians[0],)), cam)[..., 3] > 0.5
     right = r.render_rgba(GaussianTF((tf.gaussians[1],)), cam)[..., 3] > 0.5

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from helpers.strokes import sketch_over, two_blocks
+from helpers.strokes import BLOCKS_TF, sketch_over, two_blocks
 from intuitf.evaluator.metric import MetricJudge
 from intuitf.evaluator.types import Intent
 from intuitf.intent.sketch_fit import fit_sketch
@@ -12,15 +12,13 @@ from intuitf.intent.strokes import StrokeHint
 from intuitf.render import Camera, VolumeRenderer
 from intuitf.session import RunDirectory, Session
 from intuitf.session.settings import RunSettings
-from intuitf.tf import Gaussian, GaussianTF
 
 CAM = Camera(azimuth=0.0, elevation=0.0)  # the 0.4 block on the left, the 0.8 on the right
 RED, BLUE = (220 / 255, 30 / 255, 30 / 255), (40 / 255, 80 / 255, 220 / 255)
 
 
 def _sketch_intent(vol, size: int = 64) -> Intent:
-    base_tf = GaussianTF((Gaussian(0.4, 0.03, 0.8, (1, 1, 1)), Gaussian(0.8, 0.03, 0.8, (1, 1, 1))))
-    base = VolumeRenderer(vol, size=size).render(base_tf, CAM)
+    base = VolumeRenderer(vol, size=size).render(BLOCKS_TF, CAM)
     return Intent(kind="sketch", sketch=sketch_over(vol, CAM, size), base=base)
 
 
