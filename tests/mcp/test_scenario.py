@@ -150,6 +150,16 @@ async def scenario(client: Client, folders, model_url: str) -> dict:
         for key in ("mean", "width", "height", "color"):
             assert after[i][key] == pytest.approx(before[i][key]), (i, key)
 
+    # -- select the whole of what the pixel shows --------------------------------------------
+    res = await client.call_tool("select_feature", {"candidate": best, "x": int(x), "y": int(y),
+                                                    "size": 96, "whole": True, "clear": True})  # fmt: skip
+    assert not res.is_error, res.content[0].text
+    whole = res.structured_content
+    assert whole["chosen"] == sel["chosen"]  # the paper's choice is still named
+    assert whole["selected"] == sorted(f["index"] for f in making)
+    if len(making) > 1:
+        assert whole["picked"] == whole["selected"] and len(whole["gaussians"]) == len(making)
+
     # -- branch and ask anew ----------------------------------------------------------------
     br = await call(client, "branch", run=run, generation=1, changes={"judge": "metric"})
     assert br["run"] != run

@@ -16,7 +16,7 @@ from intuitf.session import RunSpec, RunStore, Session
 from intuitf.session.events import read_events
 from intuitf.session.scheduler import BATCH, INTERACTIVE, RenderScheduler
 from intuitf.session.spec import parse_spec
-from intuitf.session.views import pick_bar, pick_smallest
+from intuitf.session.views import pick_bar, pick_smallest, pick_whole
 from intuitf.volume import phantom
 
 SETTINGS = {"population": 6, "generations": 3, "image_size": 48, "output_size": 48, "top_k": 2}
@@ -308,6 +308,24 @@ def test_a_speck_tinting_the_pixel_does_not_take_the_click():
         many[i, : i + 1] = 0.1  # feature i covers i + 1 rows: feature 0 is the smallest
     many[3, 0, 0] = 0.12
     assert pick_smallest(many, x=0, y=0).index == 3
+
+
+def test_a_whole_pick_selects_every_feature_that_makes_the_pixel():
+    # A pot drawn by two Gaussians (a dense core over most of it, a rim where it is seen
+    # edge-on), soil everywhere behind, and a speck that only tints the pixel.
+    attr = np.zeros((4, 8, 8), dtype=np.float32)
+    attr[0] = 0.05  # soil: visible, under the bar at the pot
+    attr[1, 2:7, 2:7] = 0.25  # the pot's core
+    attr[2, 3:5, 3:5] = 0.65  # the pot's rim, the smaller
+    attr[3, 3, 3] = 0.03  # the speck
+    one = pick_smallest(attr, x=3, y=3)
+    assert one.index == 2 and one.selected == (2,) and one.mask.sum() == 4
+    whole = pick_whole(attr, x=3, y=3)
+    assert whole.index == 2  # the paper's choice is still named
+    assert whole.selected == (1, 2)  # the soil and the speck make too little of the pixel
+    assert whole.mask.sum() == 25 and not whole.mask[0, 0]
+    assert [v[0] for v in whole.visible] == [3, 2, 1, 0]
+    assert pick_whole(np.zeros((2, 4, 4), np.float32), 1, 1).selected == ()
 
 
 def test_views_leave_the_judging_camera_and_images_alone(vol):

@@ -18,6 +18,7 @@ import pytest
 from PIL import Image
 
 from helpers.browser import show_run
+from intuitf.session.views import pick_bar
 
 pytestmark = pytest.mark.slow
 
@@ -227,6 +228,26 @@ def test_case_study_text_query_select_refine_branch_overrule(page, web_server, s
     other.click()
     assert "Refine 2 features" in page.inner_text("#q-start")
     other.click()
+    assert "Refine 1 feature" in page.inner_text("#q-start")
+    # A double-click selects every feature that makes the pixel, outlined together.
+    box = page.locator("#view-canvas").bounding_box()
+    page.evaluate("document.getElementById('pick-info').textContent = ''")
+    page.mouse.dblclick(box["x"] + 0.5 * box["width"], box["y"] + 0.5 * box["height"])
+    page.wait_for_function(
+        "() => /all|only/.test(document.getElementById('pick-info').textContent)"
+    )
+    pick = page.evaluate(
+        "() => { const s = window.intuitfDebug.state;"
+        " return {index: s.pick.index, visible: s.pick.visible, selected: [...s.selected]}; }"
+    )
+    bar = pick_bar([tuple(v) for v in pick["visible"]])
+    making = sorted(int(i) for i, share, _ in pick["visible"] if share >= bar)
+    assert sorted(pick["selected"]) == making and pick["index"] in making
+    n = len(making)
+    assert f"Refine {n} feature" in page.inner_text("#q-start")
+    for i in making:
+        page.wait_for_selector(f"#features-strip .feature.selected[data-index='{i}']")
+    assert click_structure(page) == index  # a single click selects the one again
     assert "Refine 1 feature" in page.inner_text("#q-start")
 
     # 3. Refine only it: a new branch whose edit changes only that Gaussian.

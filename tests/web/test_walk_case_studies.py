@@ -4,6 +4,7 @@ screenshots in $INTUITF_WEB_SHOTS (tests/web/artifacts/ keeps a set that was loo
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import pytest
@@ -40,12 +41,17 @@ def test_the_three_case_studies(tmp_path):
     assert seen["undo_disabled"] is True
     assert seen["volume_held"] is True
     assert seen["refine_intent"] == "edit"
+    assert seen["pot"] and re.search(r"all \d+ that make|the only one", seen["pot_note"])
     assert seen["head_spacing"] == [1, 1, 2]  # set in the volume bar before the head's run
     sx, _, sz = seen["page_spacing"]  # the page's view took it too (a downsampled copy's
     assert 1.9 < sz / sx < 2.1  # voxels are larger, in nearly the same proportion)
     assert seen["export_name"].endswith(".tf.json") and seen["export_menu_open"] is False
     assert seen["deleted"] is True
     assert seen["sketch_intent"] == "sketch"
+    # Start waits for the strokes' fit on the tooth: past half a second the page says what
+    # it is waiting for.
+    if seen["sketch_start_s"] > 2.5:
+        assert seen["sketch_start_note"] and "sketch" in seen["sketch_start_note"]
     assert seen["reference_intent"] == "image"
     for name in ("1-bonsai-preview", "1-bonsai-refined", "2-tooth-from-sketch",
                  "3-head-from-foot-reference"):  # fmt: skip

@@ -186,8 +186,17 @@ def small_settings(page) -> None:
         page.fill(f"#q-{key.replace('_', '-')}", value)
 
 
-def start_and_wait(page, server: Server, before: str | None) -> str:
+def start_and_wait(page, server: Server, before: str | None, note: dict | None = None) -> str:
+    """Press Start and wait for the run to end and fill the gallery. ``note``: a dict that
+    gets what the page said while Start waited for the server ("start", None if it said
+    nothing) and how long it waited ("seconds")."""
+    t0 = time.perf_counter()
     page.click("#q-start")
+    if note is not None:
+        try:
+            note["start"] = page.locator("[data-busy=start]").inner_text(timeout=2_000)
+        except Exception:
+            note["start"] = None
     try:
         page.wait_for_function(
             "b => { const r = window.intuitfDebug.state.run; return r && r !== b; }",
@@ -197,6 +206,8 @@ def start_and_wait(page, server: Server, before: str | None) -> str:
     except Exception:
         said = page.locator("[data-testid=message]").all_inner_texts()
         raise AssertionError(f"Start made no run; the page says {said}") from None
+    if note is not None:
+        note["seconds"] = time.perf_counter() - t0
     run = state(page, "run")
     server.wait_run(run)
     page.wait_for_function(
@@ -219,19 +230,28 @@ def start_and_wait(page, server: Server, before: str | None) -> str:
     return run
 
 
-def click_view(page, fx: float, fy: float) -> str:
+def click_view(page, fx: float, fy: float, whole: bool = False) -> str:
     box = page.locator("#view-canvas").bounding_box()
     page.evaluate("document.getElementById('pick-info').textContent = ''")
-    page.mouse.click(box["x"] + fx * box["width"], box["y"] + fy * box["height"])
-    page.wait_for_function("() => document.getElementById('pick-info').textContent !== ''")
+    at = (box["x"] + fx * box["width"], box["y"] + fy * box["height"])
+    if whole:  # the two clicks' note comes first: wait for the double-click's
+        page.mouse.dblclick(*at)
+        page.wait_for_function(
+            "() => /all|only|Nothing/.test(document.getElementById('pick-info').textContent)"
+        )
+    else:
+        page.mouse.click(*at)
+        page.wait_for_function("() => document.getElementById('pick-info').textContent !== ''")
     return page.inner_text("#pick-info")
 
 
-def pick_something(page, spots) -> int:
+def pick_something(page, spots, whole: bool = False) -> list[int]:
+    """Click (``whole``: double-click) the first of ``spots`` (fractions of the view) that
+    shows something; the features selected."""
     for fx, fy in spots:
-        m = re.search(r"Selected feature (\d+)", click_view(page, fx, fy))
-        if m:
-            return int(m.group(1)) - 1
+        text = click_view(page, fx, fy, whole)
+        if re.search(r"Selected features? \d", text):
+            return sorted(int(i) for i in page.evaluate("[...window.intuitfDebug.state.selected]"))
     raise AssertionError("nothing to pick where the walk clicked")
 
 
@@ -278,7 +298,12 @@ def walk(browser, server: Server, out: Path) -> dict:
     seen["volume_held"] = server.api("GET", f"/api/runs/{text_run}")["volume_id"] == bonsai
     settle_view(page)
     shot(page, out, "1-bonsai-text")
-    pick_something(page, [(0.5, 0.8), (0.5, 0.75), (0.45, 0.85), (0.55, 0.7), (0.5, 0.5)])
+    # A double-click on the pot selects every feature that draws it there.
+    seen["pot"] = pick_something(
+        page, [(0.5, 0.8), (0.5, 0.75), (0.45, 0.85), (0.55, 0.7), (0.5, 0.5)], whole=True
+    )
+    seen["pot_note"] = page.inner_text("#pick-info")
+    shot(page, out, "1-bonsai-pot-selected")
     page.fill("#q-text", "make it transparent")
     refine = start_and_wait(page, server, text_run)
     seen["refine_intent"] = server.api("GET", f"/api/runs/{refine}")["info"]["intent"]["kind"]
@@ -328,7 +353,9 @@ def walk(browser, server: Server, out: Path) -> dict:
         page.mouse.up()
     shot(page, out, "2-tooth-sketch")
     page.fill("#q-text", "")
-    sketch_run = start_and_wait(page, server, tooth)
+    said: dict = {}
+    sketch_run = start_and_wait(page, server, tooth, note=said)
+    seen["sketch_start_note"], seen["sketch_start_s"] = said["start"], said["seconds"]
     seen["sketch_intent"] = server.api("GET", f"/api/runs/{sketch_run}")["info"]["intent"]["kind"]
     settle_view(page)
     shot(page, out, "2-tooth-from-sketch")

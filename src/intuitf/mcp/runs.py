@@ -465,9 +465,12 @@ class RunDesk:
         vr = await asyncio.to_thread(self.svc.shelf.view_renderer, ov, bg)
         return info, vol, vr, cam, size, shaded, bg
 
-    async def select(self, candidate, *, x, y, index, camera, size, shaded, clear) -> Reply:
+    async def select(
+        self, candidate, *, x, y, index, camera, size, shaded, clear, whole=False
+    ) -> Reply:
         """Select a feature of a candidate by picture coordinates (the paper's rule: of the
-        features that make the pixel, the one with the smallest projected area) or by index."""
+        features that make the pixel, the one with the smallest projected area; with
+        ``whole``, all of them) or by index."""
         from intuitf.mcp.camera import describe as describe_camera
         from intuitf.mcp.pictures import outline, side_by_side
         from intuitf.mcp.service import Picture
@@ -486,11 +489,13 @@ class RunDesk:
                     "Pick by index from features, or by x and y on its picture.",
                 )
             chosen: int | None = index
+            picked: tuple[int, ...] = (index,)
         elif x is not None and y is not None:
             pick = await render_scheduler().run(
-                lambda: vr.pick(tf, cam, int(x), int(y), size, shaded), INTERACTIVE
+                lambda: vr.pick(tf, cam, int(x), int(y), size, shaded, whole=bool(whole)),
+                INTERACTIVE,
             )
-            chosen = pick.index
+            chosen, picked = pick.index, pick.selected
         elif clear:
             return _reply({"candidate": qid, "selected": []})
         else:
@@ -514,26 +519,33 @@ class RunDesk:
             data["selected"] = self.selections.get(qid, [])
             data["message"] = "Nothing visible at that pixel: no feature selected."
             return _reply(data)
-        sel = sorted({*self.selections.get(qid, []), int(chosen)})
+        sel = sorted({*self.selections.get(qid, []), *(int(i) for i in picked)})
         self.selections[qid] = sel
         data["selected"] = sel
-        data["gaussian"] = tf.gaussians[chosen].to_dict()
+        if len(picked) > 1:
+            data["picked"] = list(picked)
+            data["gaussians"] = [tf.gaussians[i].to_dict() for i in picked]
+        else:
+            data["gaussian"] = tf.gaussians[chosen].to_dict()
 
         def pictures():
             cache = vr.sample_cache(cam, size, shaded)  # the pick's, when there was one
             view = cache.render(tf)
             if pick is not None and pick.mask is not None:
                 view = outline(view, pick.mask)
-            alone = cache.render_feature(tf, chosen)
+            alone = cache.render_feature(tf, list(picked))
             return side_by_side([view, alone])
 
         image = await render_scheduler().run(pictures, INTERACTIVE)
+        name = "-".join(str(i) for i in picked)
         path = await asyncio.to_thread(
-            self.svc.save_picture, image, f"{qid.replace('/', '-')}-feature{chosen}",
+            self.svc.save_picture, image, f"{qid.replace('/', '-')}-feature{name}",
             cam, vol, shaded, bg,
         )  # fmt: skip
         data["path"] = str(path)
-        data["picture"] = "left: the candidate with the chosen feature outlined; right: it alone"
+        data["picture"] = (
+            "left: the candidate with the picked feature(s) outlined; right: they alone"
+        )
         return _reply(data, [Picture(image, path)])
 
     async def features(self, candidate, *, camera, size, shaded) -> Reply:

@@ -486,10 +486,18 @@ def register(server: MCPServer, svc: McpService, results: Results) -> None:
         clear: Annotated[
             bool, Field(description="Clear this candidate's selection first.")
         ] = False,
+        whole: Annotated[
+            bool,
+            Field(
+                description="At a pixel, select every feature that makes it (a structure "
+                "drawn by several Gaussians), not only the smallest."
+            ),
+        ] = False,
     ) -> CallToolResult:
         """Select a feature of a candidate: at a pixel, the visible feature with the smallest
-        projected area (the paper's rule), or by index. Selections add up per candidate; refine
-        changes the selected ones. Shows the pick outlined and the feature alone."""  # fmt: skip
+        projected area (the paper's rule; whole: all that make the pixel), or by index.
+        Selections add up per candidate; refine changes the selected ones. Shows the pick
+        outlined and the feature(s) alone; visible_here lists what the pixel holds."""  # fmt: skip
         return await answer(
             lambda: desk.select(
                 candidate,
@@ -500,6 +508,7 @@ def register(server: MCPServer, svc: McpService, results: Results) -> None:
                 size=size,
                 shaded=shaded,
                 clear=clear,
+                whole=whole,
             )  # fmt: skip
         )
 

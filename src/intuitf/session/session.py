@@ -622,15 +622,20 @@ class Session:
         y: int = 0,
         size: int = 256,
         shaded: bool | None = None,
+        whole: bool = False,
     ) -> PickResult:
         """The feature under pixel (x, y) of the view: of those that make the pixel (see
-        :func:`~intuitf.session.views.pick_smallest`), the one of smallest projected area.
+        :func:`~intuitf.session.views.pick_smallest`), the one of smallest projected area;
+        with ``whole``, all of them (:func:`~intuitf.session.views.pick_whole`).
 
-        Returns a :class:`~intuitf.session.views.PickResult`.
+        Returns a :class:`~intuitf.session.views.PickResult`; its ``selected`` is what to
+        refine.
         """
         views = self._views
-        job = self._interactive(candidate, camera, shaded,
-                                lambda tf, cam, sh: views.pick(tf, cam, int(x), int(y), size, sh))  # fmt: skip
+        job = self._interactive(
+            candidate, camera, shaded,
+            lambda tf, cam, sh: views.pick(tf, cam, int(x), int(y), size, sh, whole=whole),
+        )  # fmt: skip
         return render_scheduler().call(job, INTERACTIVE)
 
     def features(

@@ -40,12 +40,15 @@ class PickResult:
 
     ``index`` is the Gaussian with the smallest projected area among those visible at the
     pixel (None on empty background); ``visible`` lists (index, share at the pixel, area in
-    pixels) for every visible Gaussian; ``mask`` marks the chosen feature's pixels.
+    pixels) for every visible Gaussian; ``selected`` is what the click selects: ``(index,)``
+    for the paper's pick, every feature that makes the pixel for a whole pick
+    (:func:`pick_whole`); ``mask`` marks the selected features' pixels.
     """
 
     index: int | None
     visible: tuple[tuple[int, float, int], ...]
     mask: np.ndarray | None
+    selected: tuple[int, ...] = ()
 
 
 class ViewRenderer:
@@ -104,15 +107,24 @@ class ViewRenderer:
         return self.sample_cache(camera, size, shading).attribution(tf)
 
     def pick(
-        self, tf: GaussianTF, camera: Camera, x: int, y: int, size: int, shading: bool
+        self,
+        tf: GaussianTF,
+        camera: Camera,
+        x: int,
+        y: int,
+        size: int,
+        shading: bool,
+        whole: bool = False,
     ) -> PickResult:
-        """The feature under pixel (x, y): the smallest projected area among the visible ones."""
+        """The feature under pixel (x, y): the smallest projected area among those that make
+        the pixel (:func:`pick_smallest`); with ``whole``, all of them (:func:`pick_whole`)."""
         if not (0 <= x < size and 0 <= y < size):
             raise RenderError(
                 f"Pixel ({x}, {y}) is outside the {size}×{size} view.",
                 "Give x and y from the top-left corner, within the view's size.",
             )
-        return pick_smallest(self.attribution(tf, camera, size, shading), x, y)
+        attribution = self.attribution(tf, camera, size, shading)
+        return (pick_whole if whole else pick_smallest)(attribution, x, y)
 
     def features(
         self, tf: GaussianTF, camera: Camera, size: int, shading: bool
@@ -139,6 +151,31 @@ def pick_smallest(attribution: np.ndarray, x: int, y: int) -> PickResult:
     :data:`PICK_SHARE` of the pixel's opacity (or as much as any feature holds, where none
     holds that much); ``visible`` still lists every visible one.
     """
+    visible_map, visible, making = _under(attribution, x, y)
+    if not making:
+        return PickResult(None, visible, None)
+    chosen = making[0]
+    return PickResult(chosen, visible, visible_map[chosen].copy(), (chosen,))
+
+
+def pick_whole(attribution: np.ndarray, x: int, y: int) -> PickResult:
+    """Every feature that makes pixel (x, y) (those :func:`pick_smallest` chooses among):
+    the whole of what is seen there, where one structure is drawn by several Gaussians (a
+    pot by a dense core and its rim). ``index`` is still the paper's choice; ``selected``
+    lists them all in TF order and ``mask`` is their pixels together."""
+    visible_map, visible, making = _under(attribution, x, y)
+    if not making:
+        return PickResult(None, visible, None)
+    selected = tuple(sorted(making))
+    mask = np.any(visible_map[list(selected)], axis=0)
+    return PickResult(making[0], visible, np.asarray(mask, bool), selected)
+
+
+def _under(
+    attribution: np.ndarray, x: int, y: int
+) -> tuple[np.ndarray, tuple[tuple[int, float, int], ...], list[int]]:
+    """The visibility map, the features visible at (x, y) as (index, share, area), smallest
+    area first, and those of them that make the pixel (above :func:`pick_bar`), in that order."""
     visible_map = attribution >= VISIBLE_SHARE
     areas = visible_map.reshape(len(attribution), -1).sum(axis=1)
     here = [int(i) for i in np.flatnonzero(visible_map[:, y, x])]
@@ -149,7 +186,6 @@ def pick_smallest(attribution: np.ndarray, x: int, y: int) -> PickResult:
         )
     )
     if not visible:
-        return PickResult(None, (), None)
+        return visible_map, (), []
     bar = pick_bar(visible)
-    chosen = next(i for i, share, _ in visible if share >= bar)
-    return PickResult(chosen, visible, visible_map[chosen].copy())
+    return visible_map, visible, [i for i, share, _ in visible if share >= bar]

@@ -46,11 +46,17 @@ class PickIn(_In):
     size: int = 256
     shaded: bool = True
     background: list[float] | None = None
+    whole: bool = Field(
+        False, description="Select every feature that makes the pixel, not only the smallest."
+    )
 
 
 class PickOut(BaseModel):
     index: int | None
     visible: list[list[float]] = Field(description="[index, share at the pixel, area in pixels]")
+    selected: list[int] = Field(
+        default_factory=list, description="The features the click selects (mask: their pixels)."
+    )
     mask: str | None
 
 
@@ -134,7 +140,8 @@ async def pick_result(web, tf, volume, body: PickIn, camera, size: int) -> dict:
     vr = web.view_renderer(volume, background_of(body.background))
     try:
         result = await render_scheduler().run(
-            lambda: vr.pick(tf, camera, body.x, body.y, size, body.shaded), INTERACTIVE
+            lambda: vr.pick(tf, camera, body.x, body.y, size, body.shaded, whole=body.whole),
+            INTERACTIVE,
         )
     except IntuitfError as exc:
         raise user_error(exc) from None
@@ -144,6 +151,7 @@ async def pick_result(web, tf, volume, body: PickIn, camera, size: int) -> dict:
     return {
         "index": result.index,
         "visible": [[int(i), float(share), int(area)] for i, share, area in result.visible],
+        "selected": [int(i) for i in result.selected],
         "mask": mask,
     }
 

@@ -491,11 +491,12 @@ export function pickBar(visible) {
 
 /**
  * The paper's rule over an attribution (N × H × W): of the features under (x, y) (visible there
- * and holding PICK_SHARE of the pixel's opacity), the one with the smallest projected area.
- * {index, visible: [[i, share, area]], mask} as the server's pick_smallest; mask is a
- * Uint8Array (H × W) of the chosen feature's pixels.
+ * and holding PICK_SHARE of the pixel's opacity), the one with the smallest projected area;
+ * with `whole`, all of them (a structure several Gaussians draw). {index, visible: [[i, share,
+ * area]], selected, mask} as the server's pick_smallest and pick_whole; mask is a Uint8Array
+ * (H × W) of the selected features' pixels.
  */
-export function pickSmallest(attr, n, width, height, x, y) {
+export function pickSmallest(attr, n, width, height, x, y, whole = false) {
   const size = width * height;
   const visible = [];
   for (let i = 0; i < n; i++) {
@@ -507,10 +508,11 @@ export function pickSmallest(attr, n, width, height, x, y) {
     visible.push([i, here, area]);
   }
   visible.sort((a, b) => a[2] - b[2] || b[1] - a[1] || a[0] - b[0]);
-  if (!visible.length) return { index: null, visible: [], mask: null };
+  if (!visible.length) return { index: null, visible: [], selected: [], mask: null };
   const bar = pickBar(visible);
-  const chosen = visible.find((v) => v[1] >= bar)[0];
-  return { index: chosen, visible, mask: featureMask(attr, [chosen], width, height) };
+  const making = visible.filter((v) => v[1] >= bar).map((v) => v[0]);
+  const selected = whole ? [...making].sort((a, b) => a - b) : [making[0]];
+  return { index: making[0], visible, selected, mask: featureMask(attr, selected, width, height) };
 }
 
 /** Pixels where any of `indices` is visible: Uint8Array (H × W) of 0/1. */

@@ -245,11 +245,12 @@ export function canPick() {
   return !!R && R.floatTargets;
 }
 
-/** The paper's pick at pixel (x, y): {index, visible: [[i, share, area]], mask (Uint8Array)}. */
-export function pick(tf, camera, size, x, y) {
+/** The paper's pick at pixel (x, y) (`whole`: every feature that makes it):
+ * {index, visible: [[i, share, area]], selected, mask (Uint8Array)}. */
+export function pick(tf, camera, size, x, y, whole = false) {
   const t0 = performance.now();
   const attr = attribution(tf, camera, size);
-  const res = pickSmallest(attr, Math.min(16, tf.gaussians.length), size, size, x, y);
+  const res = pickSmallest(attr, Math.min(16, tf.gaussians.length), size, size, x, y, whole);
   stats.pickMs = Math.round(performance.now() - t0);
   return res;
 }

@@ -323,6 +323,17 @@ async function start() {
   const btn = $("q-start");
   const text = $("q-text").value.trim();
   btn.disabled = true;
+  // The server answers once the run is set up, and a sketch's strokes are fitted to the
+  // volume first (seconds on a real volume): say so while the button waits.
+  let fitting = false;
+  let note = null;
+  const slow = setTimeout(() => {
+    note = showMessage(
+      fitting ? "Fitting the sketch's colours to the volume; the run starts right after…" : "Starting…",
+      { kind: "info", timeout: 0 },
+    );
+    note.dataset.busy = "start";
+  }, 500);
   try {
     const cur = splitQid(state.current);
     const preview = !state.run && !cur && shownTF();
@@ -349,6 +360,7 @@ async function start() {
       showMessage(`Refining ${body.selected.map((i) => i + 1).join(", ")} of ${cur.run}/${cur.cid} in ${res.name}.`, { kind: "ok" });
     } else if (mode === "continue" && state.run) {
       const intent = await intentFromPanel(text);
+      fitting = intent.kind === "sketch";
       const body = { intent };
       const g = num("q-generations");
       if (g !== undefined) body.generations = Math.round(g);
@@ -360,6 +372,7 @@ async function start() {
     } else {
       if (!state.volumeId) throw new UserError("Choose a volume first (top left).");
       const intent = await intentFromPanel(text, { firstStage: true });
+      fitting = intent.kind === "sketch";
       await startRun({ volume: state.volumeId, intent, judge: judgeSpec(), settings: settings() });
     }
     if (state.sketching) setSketching(false);
@@ -367,6 +380,8 @@ async function start() {
     if (err instanceof UserError) showMessage(err.message, { kind: "warn" });
     else showError(err);
   } finally {
+    clearTimeout(slow);
+    if (note) note.querySelector(".toast-close").click();
     btn.disabled = false;
     syncButtons();
   }

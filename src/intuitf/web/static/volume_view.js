@@ -88,6 +88,11 @@ export function initVolumeView() {
   canvas.addEventListener("pointerdown", onDown);
   canvas.addEventListener("pointermove", onMove);
   canvas.addEventListener("pointerup", onUp);
+  // A double-click selects the whole of what is under the cursor: every feature that makes
+  // the pixel (a pot drawn by a dense core and a rim), not only the smallest.
+  canvas.addEventListener("dblclick", (e) => {
+    if (!state.sketching) pickAt(e, e.ctrlKey || e.metaKey || e.altKey, true);
+  });
   canvas.addEventListener("pointercancel", () => {
     drag = null;
   });
@@ -464,7 +469,10 @@ function onWheel(e) {
 }
 
 // -- picking ---------------------------------------------------------------------------------------
-async function pickAt(e, add) {
+let pickSeq = 0; // a server pick answers only if no later click came first
+
+async function pickAt(e, add, whole = false) {
+  const seq = ++pickSeq;
   const r = canvas.getBoundingClientRect();
   const x = Math.min(viewSize - 1, Math.max(0, Math.floor(((e.clientX - r.left) / r.width) * viewSize)));
   const y = Math.min(viewSize - 1, Math.max(0, Math.floor(((e.clientY - r.top) / r.height) * viewSize)));
@@ -481,8 +489,8 @@ async function pickAt(e, add) {
   if (gt && pageReady(gt.volume) && glv.canPick()) {
     // The page's own pick: an attribution pass on the GPU and the smallest-area rule.
     clickStart = performance.now();
-    const res = glv.pick(gt.tf, camera, viewSize, x, y);
-    applyPick(res, { camera, x, y, add });
+    const res = glv.pick(gt.tf, camera, viewSize, x, y, whole);
+    applyPick(res, { camera, x, y, add, whole });
     return;
   }
   try {
@@ -497,9 +505,10 @@ async function pickAt(e, add) {
       size: viewSize,
       shaded: state.shaded,
       background: hexToRgb(state.background), // the still's background: one sample cache for both
+      whole,
     });
-    if (state.current !== was) return;
-    applyPick(res, { camera, x, y, add });
+    if (state.current !== was || seq !== pickSeq) return;
+    applyPick(res, { camera, x, y, add, whole });
   } catch (err) {
     showError(err);
   }
@@ -507,13 +516,23 @@ async function pickAt(e, add) {
 
 let clickStart = null;
 
-function applyPick(res, { camera, x, y, add }) {
+function applyPick(res, { camera, x, y, add, whole }) {
   {
     state.follow = false;
     let selected;
     if (res.index === null || res.index === undefined) {
       selected = add ? new Set(state.selected) : new Set();
       pickInfo.textContent = "Nothing visible here: selection cleared.";
+    } else if (whole) {
+      // Everything under the cursor joins (a Ctrl-double-click adds it to the selection).
+      const picked = res.selected && res.selected.length ? res.selected : [res.index];
+      selected = new Set(add ? state.selected : []);
+      for (const i of picked) selected.add(i);
+      const names = picked.map((i) => i + 1).join(", ");
+      pickInfo.textContent =
+        picked.length > 1
+          ? `Selected features ${names}: all ${picked.length} that make this pixel.`
+          : `Selected feature ${names}: the only one that makes this pixel.`;
     } else {
       selected = new Set(add ? state.selected : []);
       if (add && state.selected.has(res.index)) selected.delete(res.index);
@@ -523,7 +542,9 @@ function applyPick(res, { camera, x, y, add }) {
       const vis = res.visible || [];
       const bar = pickBar(vis);
       const n = vis.filter((v) => v[1] >= bar).length;
-      pickInfo.textContent = `Selected feature ${res.index + 1}${n > 1 ? ` (the smallest of the ${n} that make this pixel)` : ""}.`;
+      pickInfo.textContent = `Selected feature ${res.index + 1}${
+        n > 1 ? ` (the smallest of the ${n} that make this pixel; double-click for all ${n})` : ""
+      }.`;
     }
     set({ pick: { ...res, camera, size: viewSize, x, y }, selected });
   }
