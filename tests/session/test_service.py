@@ -345,6 +345,9 @@ def test_views_leave_the_judging_camera_and_images_alone(vol):
         bar = pick_bar(p.visible)
         areas = {i: a for i, share, a in p.visible if share >= bar}
         assert areas[p.index] == min(areas.values())
+        assert p.selected == (p.index,)
+        whole = s.pick(cid, Camera(azimuth=90, elevation=10), x=24, y=24, size=48, whole=True)
+        assert whole.selected == tuple(sorted(areas)) and whole.index == p.index
     assert s.camera == camera and np.array_equal(s.image(cid, s.tfs[cid]), judged)
 
 

@@ -96,7 +96,7 @@ PAGE_RENDER = """async ({id, tf, camera, size, shadings, picks}) => {
   const gradient = await r.gradientReady;  // shade from the gradient texture, as frames do
   const b64 = (a) => { let s = ''; for (let i = 0; i < a.length; i += 32768)
     s += String.fromCharCode.apply(null, a.subarray(i, i + 32768)); return btoa(s); };
-  const out = {gpu: r.gpu, format: vol.format, gradient, images: {}, picks: []};
+  const out = {gpu: r.gpu, format: vol.format, gradient, images: {}, picks: [], wholes: []};
   for (const shading of shadings) {
     r.render({tf, camera, width: size, height: size, shading});
     out.images[shading ? 'shaded' : 'unshaded'] = b64(r.readRGB());
@@ -105,6 +105,7 @@ PAGE_RENDER = """async ({id, tf, camera, size, shadings, picks}) => {
   for (const [x, y] of picks) {
     const p = R.pickSmallest(attr, tf.gaussians.length, size, size, x, y);
     out.picks.push(p.index);
+    out.wholes.push(R.pickSmallest(attr, tf.gaussians.length, size, size, x, y, true).selected);
   }
   return out;
 }"""
@@ -167,8 +168,17 @@ def test_page_matches_server(server, gl_page, name):
         assert server_img.max() > 40, "the case must show something"
         assert diff.mean() <= 2.0, report
     server_picks = [vr.pick(tf, cam, x, y, SIZE, False).index for x, y in pick_at]
-    report["picks"] = {"points": pick_at, "page": got["picks"], "server": server_picks}
+    server_wholes = [list(vr.pick(tf, cam, x, y, SIZE, False, whole=True).selected)
+                     for x, y in pick_at]  # fmt: skip
+    report["picks"] = {"points": pick_at, "page": got["picks"], "server": server_picks,
+                       "page_whole": got["wholes"], "server_whole": server_wholes}  # fmt: skip
     print(json.dumps(report))
     agree = sum(a == b for a, b in zip(got["picks"], server_picks, strict=True))
     assert got["picks"][-1] is None and server_picks[-1] is None
     assert agree >= len(pick_at) - 1, report  # one borderline pixel may flip
+    # A double-click's whole selection: the same features, the paper's pick among them.
+    agree = sum(a == b for a, b in zip(got["wholes"], server_wholes, strict=True))
+    assert got["wholes"][-1] == [] and server_wholes[-1] == []
+    assert agree >= len(pick_at) - 1, report
+    for index, whole in zip(server_picks, server_wholes, strict=True):
+        assert (index is None and not whole) or index in whole
