@@ -234,7 +234,8 @@ def test_case_study_text_query_select_refine_branch_overrule(page, web_server, s
     page.evaluate("document.getElementById('pick-info').textContent = ''")
     page.mouse.dblclick(box["x"] + 0.5 * box["width"], box["y"] + 0.5 * box["height"])
     page.wait_for_function(
-        "() => /all|only/.test(document.getElementById('pick-info').textContent)"
+        "() => /: (all [0-9]+ that make|the only one that makes) this pixel/"
+        ".test(document.getElementById('pick-info').textContent)"
     )
     pick = page.evaluate(
         "() => { const s = window.intuitfDebug.state;"

@@ -237,7 +237,8 @@ def click_view(page, fx: float, fy: float, whole: bool = False) -> str:
     if whole:  # the two clicks' note comes first: wait for the double-click's
         page.mouse.dblclick(*at)
         page.wait_for_function(
-            "() => /all|only|Nothing/.test(document.getElementById('pick-info').textContent)"
+            "() => /: (all [0-9]+ that make|the only one that makes) this pixel|Nothing/"
+            ".test(document.getElementById('pick-info').textContent)"
         )
     else:
         page.mouse.click(*at)
