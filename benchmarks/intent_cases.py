@@ -490,8 +490,11 @@ def direct_tf(
     narrow Gaussians: blue on the root's surface values (0.578), yellow on the dentin
     (0.681), seen through the lower crown's thin enamel, red on the thick enamel (0.947).
     The offline judge's stroke measure ranks that TF below the sketch fit's (worst stroke
-    plus 0.3 of the mean: 27.9 against 19.4, its blue stroke at 23.2 from the shaded root's
-    greyed pixels), and a fit started from its centres returns to the judge's optimum.
+    plus 0.3 of the mean: 27.9 against 19.4), and a fit started from its centres returns to
+    the judge's optimum. Its blue stroke measures 23.2: the root's pixels are a purer blue
+    (0, 0.21, 1.0) than the stroke's, which :func:`measure` does not see, because it
+    averages each ray's colour and the yellow dentin behind the root's surface desaturates
+    the average toward the asked blue.
     Returns the label TF's measures and the best TF's."""
     import cma
 
