@@ -23,10 +23,9 @@ BLOCKS_TF = GaussianTF((Gaussian(0.4, 0.03, 0.8, (1, 1, 1)), Gaussian(0.8, 0.03,
 
 def sketch_over(vol: Volume, cam: Camera, size: int = 64) -> np.ndarray:
     """Red strokes over the left block's pixels, blue over the right one's, as seen from cam."""
-    tf = BLOCKS_TF
     r = VolumeRenderer(vol, size=size, shading=False)
-    left = r.render_rgba(GaussianTF((tf.gaussians[0],)), cam)[..., 3] > 0.5
-    right = r.render_rgba(GaussianTF((tf.gaussians[1],)), cam)[..., 3] > 0.5
+    left = r.render_rgba(GaussianTF((BLOCKS_TF.gaussians[0],)), cam)[..., 3] > 0.5
+    right = r.render_rgba(GaussianTF((BLOCKS_TF.gaussians[1],)), cam)[..., 3] > 0.5
     sk = np.zeros((size, size, 4), np.uint8)
     row = size // 2
     for mask, colour in ((left & ~right, (220, 30, 30)), (right, (40, 80, 220))):

@@ -127,22 +127,19 @@ def test_candidate_views_and_exports(client, done_run):
         f"/api/candidates/{qid}/pick", json={"camera": cam, "x": 32, "y": 32, "size": 64}
     ).json()
     assert pick["index"] is not None and 0 <= pick["index"] < n
-    if pick["index"] is not None:
-        # The paper's rule: the smallest of the features that hold enough of the pixel (the
-        # visible list is sorted by area; one that makes too little of the pixel is passed).
-        bar = pick_bar([tuple(v) for v in pick["visible"]])
-        assert pick["index"] == next(i for i, share, _ in pick["visible"] if share >= bar)
-        assert pick["mask"].startswith("data:image/png;base64,")
-        assert pick["selected"] == [pick["index"]]
-        # A whole pick (a double-click) selects every feature that makes the pixel.
-        whole = client.post(
-            f"/api/candidates/{qid}/pick",
-            json={"camera": cam, "x": 32, "y": 32, "size": 64, "whole": True},
-        ).json()
-        assert whole["index"] == pick["index"] and whole["visible"] == pick["visible"]
-        assert whole["selected"] == sorted(
-            int(i) for i, share, _ in pick["visible"] if share >= bar
-        )
+    # The paper's rule: the smallest of the features that hold enough of the pixel (the
+    # visible list is sorted by area; one that makes too little of the pixel is passed).
+    bar = pick_bar([tuple(v) for v in pick["visible"]])
+    assert pick["index"] == next(i for i, share, _ in pick["visible"] if share >= bar)
+    assert pick["mask"].startswith("data:image/png;base64,")
+    assert pick["selected"] == [pick["index"]]
+    # A whole pick (a double-click) selects every feature that makes the pixel.
+    whole = client.post(
+        f"/api/candidates/{qid}/pick",
+        json={"camera": cam, "x": 32, "y": 32, "size": 64, "whole": True},
+    ).json()
+    assert whole["index"] == pick["index"] and whole["visible"] == pick["visible"]
+    assert whole["selected"] == sorted(int(i) for i, share, _ in pick["visible"] if share >= bar)
     feats = client.post(f"/api/candidates/{qid}/features", json={"camera": cam, "size": 48}).json()
     assert [f["index"] for f in feats] == list(range(n))
     assert all(f["image"].startswith("data:image/png;base64,") for f in feats)
