@@ -123,6 +123,35 @@ def test_without_webgl2_the_server_renders_the_view_and_says_why(chromium, serve
         b.close()
 
 
+def test_without_webgl2_a_double_click_asks_the_server_for_one_whole_pick(chromium, server):
+    """A double-click is two clicks and a double-click: on the server's path it must cost one
+    pick, the whole one, not two single picks computed ahead of it; a click alone still picks."""
+    b, page, errors = open_page(chromium, server, ["--disable-webgl", "--disable-webgl2"])
+    picks: list[dict] = []
+    page.on(
+        "request",
+        lambda r: picks.append(r.post_data_json) if r.url.endswith("/pick") else None,
+    )
+    try:
+        page.wait_for_function(
+            "() => { const c = document.getElementById('view-canvas');"
+            " return c.dataset.quality === 'full' && Number(c.dataset.frames || 0) > 0; }"
+        )
+        box = page.locator("#view-canvas").bounding_box()
+        at = (box["x"] + 0.5 * box["width"], box["y"] + 0.5 * box["height"])
+        page.mouse.dblclick(*at)
+        page.wait_for_function("() => document.getElementById('pick-info').textContent !== ''")
+        page.wait_for_timeout(600)  # longer than a single click's wait for a second one
+        assert [p["whole"] for p in picks] == [True]
+        page.evaluate("document.getElementById('pick-info').textContent = ''")
+        page.mouse.click(*at)
+        page.wait_for_function("() => document.getElementById('pick-info').textContent !== ''")
+        assert [p["whole"] for p in picks] == [True, False]
+        assert not errors, errors
+    finally:
+        b.close()
+
+
 def test_a_volume_over_the_page_limits_is_downsampled_with_a_note(chromium, server):
     if data_dir() is None or not (DATA / NEGHIP).exists():
         pytest.skip(f"{NEGHIP} is not in {DATA}")

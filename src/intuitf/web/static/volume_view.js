@@ -470,6 +470,11 @@ function onWheel(e) {
 
 // -- picking ---------------------------------------------------------------------------------------
 let pickSeq = 0; // a server pick answers only if no later click came first
+// A single click's pick by the server waits this long for a second click: a double-click's
+// two clicks would otherwise send two picks ahead of its whole one, and the server computes
+// each (three where one is asked). The page's own pick is instant and never waits.
+const DOUBLE_CLICK_MS = 300;
+let singlePick = null;
 
 async function pickAt(e, add, whole = false) {
   const seq = ++pickSeq;
@@ -493,6 +498,19 @@ async function pickAt(e, add, whole = false) {
     applyPick(res, { camera, x, y, add, whole });
     return;
   }
+  clearTimeout(singlePick);
+  singlePick = null;
+  if (!whole) {
+    singlePick = setTimeout(() => {
+      singlePick = null;
+      serverPick(seq, preview, cur, was, { camera, x, y, add, whole });
+    }, DOUBLE_CLICK_MS);
+    return;
+  }
+  await serverPick(seq, preview, cur, was, { camera, x, y, add, whole });
+}
+
+async function serverPick(seq, preview, cur, was, { camera, x, y, add, whole }) {
   try {
     const path = preview
       ? `/api/volumes/${api.enc(preview.volume)}/pick`
