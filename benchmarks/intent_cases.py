@@ -77,7 +77,7 @@ from skimage.color import deltaE_ciede2000, rgb2lab
 from intuitf.evaluator.metric import NAMED_COLOURS, MetricJudge
 from intuitf.evaluator.types import Intent
 from intuitf.render import Camera, VolumeRenderer
-from intuitf.render.kernels import _cell, _clip, _ray, _trilinear_at
+from intuitf.render.kernels import _cell, _classify, _clip, _ray, _trilinear_at
 from intuitf.session import RunSettings, Session
 from intuitf.session.views import pick_whole
 from intuitf.testing.oracle_judge import OracleJudge
@@ -285,8 +285,10 @@ class Scene:
         out = np.zeros((r.width * r.height, 4), np.float32)
         stop = np.zeros(256, np.bool_)
         stop[[self.ids[n] for n in named if n != name]] = True
-        _label_march(r.volume.data, self.lab, np.uint8(self.ids[name]), stop, r.lut(tf),
-                     r.frame(self.camera).packed(), r._spacing, r.sample_distance, out)  # fmt: skip
+        cls = r.classification(tf)
+        _label_march(r.volume.data, self.lab, np.uint8(self.ids[name]), stop, cls.lut,
+                     cls.table, r.preintegrated, r.frame(self.camera).packed(), r._spacing,
+                     r.sample_distance, out)  # fmt: skip
         return out.reshape(r.height, r.width, 4)
 
     def alpha_without_background(self, tf) -> np.ndarray:
@@ -306,14 +308,14 @@ class Scene:
 
 
 @njit(parallel=True, cache=True)
-def _label_march(data, lab, target, stop, lut, cam, spacing, dt, out):
+def _label_march(data, lab, target, stop, lut, table, preint, cam, spacing, dt, out):
     """Per pixel of ``cam``: what the ray shows from its first visible sample whose nearest
     voxel is labelled ``target`` on, up to the first one labelled ``l`` with ``stop[l]``,
     premultiplied RGBA, composited as the renderer's unshaded ray marcher does (same rays,
-    steps and LUT); what lies in front is left out."""
+    steps, LUT and pre-integrated segments, a segment counting for the label at its back
+    sample); what lies in front is left out."""
     nz, ny, nx = data.shape
     width, height = int(cam[17]), int(cam[18])
-    scale = lut.shape[0] - 1.0
     for p in prange(width * height):
         ox, oy, oz, dx, dy, dz = _ray(cam, p // width, p % width)
         oxi, oyi, ozi = ox / spacing[0], oy / spacing[1], oz / spacing[2]
@@ -322,16 +324,16 @@ def _label_march(data, lab, target, stop, lut, cam, spacing, dt, out):
         tr, r, g, b, a_own = 1.0, 0.0, 0.0, 0.0, 0.0
         seen = False
         if t1 >= t0:
+            vf = 0.0
             for k in range(int((t1 - t0) / dt) + 1):
                 t = t0 + k * dt
                 px, py, pz = oxi + t * dxi, oyi + t * dyi, ozi + t * dzi
                 i, fx = _cell(px, nx)
                 j, fy = _cell(py, ny)
                 kk, fz = _cell(pz, nz)
-                x = min(max(_trilinear_at(data, i, j, kk, fx, fy, fz) * scale, 0.0), scale)
-                q = min(int(x), lut.shape[0] - 2)
-                f = x - q
-                a = lut[q, 3] * (1.0 - f) + lut[q + 1, 3] * f
+                v = min(max(_trilinear_at(data, i, j, kk, fx, fy, fz), 0.0), 1.0)
+                a, cr, cg, cb = _classify(lut, table, preint, False, vf if k > 0 else v, v)
+                vf = v
                 if a <= 0.0:
                     continue
                 here = lab[min(int(pz + 0.5), nz - 1), min(int(py + 0.5), ny - 1),
@@ -343,9 +345,9 @@ def _label_march(data, lab, target, stop, lut, cam, spacing, dt, out):
                 elif stop[here]:
                     break
                 w = tr * a
-                r += w * (lut[q, 0] * (1.0 - f) + lut[q + 1, 0] * f)
-                g += w * (lut[q, 1] * (1.0 - f) + lut[q + 1, 1] * f)
-                b += w * (lut[q, 2] * (1.0 - f) + lut[q + 1, 2] * f)
+                r += w * cr
+                g += w * cg
+                b += w * cb
                 a_own += w
                 tr *= 1.0 - a
                 if tr < 1e-3:

@@ -4,6 +4,13 @@ VTK's fixed-point ray caster re-rendering the same TFs (the CPU baseline).
 Run: ``python benchmarks/render.py`` (``--quick`` for fewer TFs, ``--no-vtk`` to skip VTK).
 Figures are medians; the machine may be shared, so run it twice before believing a figure.
 
+``--preintegration``: what classifying each segment between samples (the default,
+:mod:`intuitf.tf.preintegration`) buys against classifying each sample alone (VTK's way,
+``preintegrated=False``): each picture's mean CIEDE2000 to the same TF sampled ten times finer
+(post-classified, step 0.05), and the time per candidate and per new-camera picture, for TFs
+with thin Gaussians (a TF fitted to the tooth's sketch, random ones 0.002-0.01 wide) and the
+random TFs above, on the tooth and the foot at 256².
+
 On a machine with an NVIDIA GPU (``pip install -e '.[cuda,test]'``):
 ``python benchmarks/render.py --device cuda`` times the CUDA backend: a population of 50 random
 TFs rendered in one launch at 256², 512² and 1024², unshaded and shaded, for the foot (256³) and
@@ -108,6 +115,78 @@ def bench_volume(name, vol, tfs, sizes, use_vtk: bool, sample_distance: float = 
             print(line, flush=True)
 
 
+def _thin_tfs(n: int, seed: int = 1) -> list[GaussianTF]:
+    """Random TFs whose Gaussians are thinner than a surface's values change between samples
+    (0.002-0.01 of the range), as sketch fits and narrow picks make."""
+    rng = np.random.default_rng(seed)
+    return [
+        GaussianTF(
+            tuple(
+                Gaussian(
+                    mean=float(rng.uniform(0.3, 0.95)),
+                    width=float(rng.uniform(0.002, 0.01)),
+                    height=float(rng.uniform(0.1, 0.8)),
+                    color=tuple(float(c) for c in rng.uniform(0, 1, 3)),
+                )
+                for _ in range(3)
+            )
+        )
+        for _ in range(n)
+    ]
+
+
+#: The TF the tooth sketch's fit found (benchmarks/sketch_fit.py, seed 0): thin Gaussians on
+#: the tooth's surface values.
+TOOTH_FIT = GaussianTF(
+    (
+        Gaussian(mean=0.617, width=0.005, height=0.104, color=(0.16, 0.31, 0.86)),
+        Gaussian(mean=0.697, width=0.009, height=0.477, color=(0.94, 0.86, 0.16)),
+        Gaussian(mean=0.953, width=0.018, height=0.115, color=(0.86, 0.12, 0.12)),
+    )
+)
+
+
+def bench_preintegration(quick: bool) -> None:
+    from skimage.color import deltaE_ciede2000, rgb2lab
+
+    n = 4 if quick else 12
+    cam = Camera(azimuth=30, elevation=10)
+    new_cam = Camera(azimuth=75, elevation=-10)
+    sets = {"tooth fit": [TOOTH_FIT], "thin": _thin_tfs(n), "random": random_tfs(n)}
+    print("\n== pre-integrated against post-classified: mean CIEDE2000 to a 10x finer picture")
+    for file in ("tooth_103x94x161_uint8.raw.gz", "foot_zfp8lossy_256x256x256_uint8.raw.gz"):
+        vol = load_volume(DATA / file)
+        name = file.split("_")[0]
+        ref_r = VolumeRenderer(vol, size=256, sample_distance=0.05, preintegrated=False)
+        modes = {
+            "post 0.5": VolumeRenderer(vol, size=256, preintegrated=False),
+            "pre 0.5": VolumeRenderer(vol, size=256),
+            "post 0.25": VolumeRenderer(vol, size=256, sample_distance=0.25, preintegrated=False),
+            "pre 1.0": VolumeRenderer(vol, size=256, sample_distance=1.0),
+        }
+        for label, tfs in sets.items():
+            if name == "foot" and label == "tooth fit":
+                continue
+            refs = [rgb2lab(ref_r.render(tf, cam) / 255.0) for tf in tfs]
+            cells = []
+            for mode, r in modes.items():
+                cache = r.sample_cache(cam)
+                cache.render(tfs[0])
+                r.render(tfs[0], new_cam)
+                errs, per, full = [], [], []
+                for tf, ref in zip(tfs, refs, strict=True):
+                    t, img = timed(lambda tf=tf, c=cache: c.render(tf))
+                    per.append(t)
+                    full.append(timed(lambda tf=tf, r=r: r.render(tf, new_cam))[0])
+                    lit = ref[..., 0] > 3
+                    errs.append(float(deltaE_ciede2000(rgb2lab(img / 255.0), ref)[lit].mean()))
+                cells.append(
+                    f"{mode} {np.mean(errs):4.2f} ({statistics.median(per) * 1e3:4.1f} ms,"
+                    f" new camera {statistics.median(full) * 1e3:4.0f} ms)"
+                )
+            print(f"{name:5} {label:9} | " + " | ".join(cells), flush=True)
+
+
 # ---------------------------------------------------------------------------------------------
 # --device cuda
 # ---------------------------------------------------------------------------------------------
@@ -188,7 +267,7 @@ def bench_cuda_config(vol, size, shading, tfs, args, peak, vtk_ok) -> dict:
     # A population end to end: LUTs on the host, upload, one launch, 8-bit pictures back.
     t_pop, pics = timed(lambda: cache.render_many(tfs), repeat=args.repeat)
     row["per_cand_ms"] = t_pop / k * 1e3
-    t_lut, _ = timed(lambda: [gpu.lut(tf) for tf in tfs], repeat=3)
+    t_lut, _ = timed(lambda: [gpu.classification(tf) for tf in tfs], repeat=3)
     row["lut_ms"] = t_lut / k * 1e3
     # The kernel alone, timed with CUDA events.
     parts = cache.upload(tfs)
@@ -196,8 +275,8 @@ def bench_cuda_config(vol, size, shading, tfs, args, peak, vtk_ok) -> dict:
     for _ in range(args.repeat):
         start, stop = cuda.event(), cuda.event()
         start.record()
-        for kk, luts, occ in parts:
-            cache.launch(kk, luts, occ)
+        for kk, luts, tables, occ in parts:
+            cache.launch(kk, luts, tables, occ)
         stop.record()
         stop.synchronize()
         times.append(start.elapsed_time(stop))
@@ -558,7 +637,15 @@ def main() -> None:
     ap.add_argument("--generations", type=int, default=3, help="--generation: generations to run")
     ap.add_argument("--gen-size", type=int, default=256, help="--generation: judging picture size")
     ap.add_argument("--json", default=None, help="append each measured row as a JSON line here")
+    ap.add_argument(
+        "--preintegration",
+        action="store_true",
+        help="pre-integrated against post-classified pictures: quality and time",
+    )
     args = ap.parse_args()
+    if args.preintegration:
+        bench_preintegration(args.quick)
+        return
     if args.ptx:
         ptx_report(args.ptx)
         return

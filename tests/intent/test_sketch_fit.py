@@ -27,10 +27,11 @@ def test_the_fit_moves_a_stroke_gaussian_onto_the_values_that_show_it():
     intent = _sketch_intent(vol)
     view = VolumeRenderer(vol, size=64).sample_cache(CAM)
     judge = MetricJudge()
-    # The red stroke's hint placed off its block's value (0.40), and too narrow to reach it:
-    # the left block shows nothing, its stroke's error is the worst there is.
+    # The red stroke's hint placed off its block's value (0.40), above it and too narrow to
+    # reach it: the left block shows nothing, its stroke's error is the worst there is. (Below
+    # it, the segments from the air into the block would cross it: pre-integrated, a shell.)
     strokes = [
-        StrokeHint(RED, 100, 0.33, 0.01, 1.0, (0.05, 0.8)),
+        StrokeHint(RED, 100, 0.47, 0.01, 1.0, (0.05, 0.8)),
         StrokeHint(BLUE, 100, 0.80, 0.02, 1.0, (0.05, 0.8)),
     ]
     fit = fit_sketch(strokes, lambda tf: judge.stroke_errors(view.render(tf), intent), seed=0)

@@ -142,27 +142,36 @@ def test_cache_matches_direct_renderer_within_quantisation(tooth, foot):
 def test_empty_space_skipping_changes_no_pixel(foot):
     """The renderer's two skipping grids (8³ blocks jumped over, 2³ blocks passed over) give
     exactly the picture of marching every sample, and do skip: most of the foot's blocks are
-    invisible to a TF of its bone alone."""
+    invisible to a TF of its bone alone. Pre-integrated too, where a skipped stretch's first
+    and last segments (into and out of the bone) must still be classified, and with a
+    Gaussian so narrow that only those segments show it."""
     from intuitf.render import kernels
     from intuitf.render.context import BLOCK_SIZE, FINE_BLOCK_SIZE
     from intuitf.render.renderer import EARLY_STOP
 
     bone = GaussianTF((Gaussian(mean=0.6, width=0.05, height=0.4, color=(1.0, 0.9, 0.8)),))
-    for shading in (False, True):
-        r = VolumeRenderer(foot, size=96, shading=shading)
-        for cam in (Camera(azimuth=35, elevation=25), Camera(azimuth=90, elevation=-60, roll=20)):
-            lut = r.lut(bone)
-            coarse = r._visible_blocks(lut, BLOCK_SIZE)
-            fine = r._visible_blocks(lut, FINE_BLOCK_SIZE)
-            assert coarse.mean() < 0.6 and fine.mean() < coarse.mean()
-            every = np.empty((96 * 96, 4), dtype=np.float32)
-            kernels.march(foot.data, r._shading_voxels(), shading, np.ones_like(coarse),
-                          BLOCK_SIZE, np.ones_like(fine), 1, lut, False,
-                          r.frame(cam).packed(), r._spacing, r.sample_distance,
-                          r.shade_params, EARLY_STOP, every)  # fmt: skip
-            skipped = r.render_rgba(bone, cam)
-            assert skipped[..., 3].max() > 0.5  # the bone shows
-            np.testing.assert_array_equal(skipped.reshape(-1, 4), every)
+    shell = GaussianTF((Gaussian(mean=0.3, width=0.002, height=0.6, color=(0.2, 0.5, 1.0)),))
+    for preintegrated in (False, True):
+        for tf in (bone, shell) if preintegrated else (bone,):
+            for shading in (False, True):
+                r = VolumeRenderer(foot, size=96, shading=shading, preintegrated=preintegrated)
+                for cam in (
+                    Camera(azimuth=35, elevation=25),
+                    Camera(azimuth=90, elevation=-60, roll=20),
+                ):
+                    cls = r.classification(tf)
+                    coarse = r._visible_blocks(cls.occupied, BLOCK_SIZE)
+                    fine = r._visible_blocks(cls.occupied, FINE_BLOCK_SIZE)
+                    assert coarse.mean() < 0.6 and fine.mean() < coarse.mean()
+                    every = np.empty((96 * 96, 4), dtype=np.float32)
+                    kernels.march(foot.data, r._shading_voxels(), shading, np.ones_like(coarse),
+                                  BLOCK_SIZE, np.ones_like(fine), 1, cls.lut, cls.table,
+                                  preintegrated, False, r.frame(cam).packed(), r._spacing,
+                                  r.sample_distance, r.shade_params, EARLY_STOP,
+                                  every)  # fmt: skip
+                    skipped = r.render_rgba(tf, cam)
+                    assert skipped[..., 3].max() > 0.5  # the bone (or the shell) shows
+                    np.testing.assert_array_equal(skipped.reshape(-1, 4), every)
 
 
 def test_cache_stores_uint16_samples_for_wide_luts():
@@ -290,3 +299,34 @@ def test_render_feature_shows_one_gaussian_over_a_ghost(tooth):
     assert img[on].mean() > 200
     with pytest.raises(RenderError):
         cache.render_feature(tf, 5)
+
+
+def test_preintegration_renders_a_thin_shell_as_fine_sampling_does(tooth):
+    """A Gaussian thinner than the values' step between samples: classified sample by sample
+    it shows as rings (each ray hits it or not), pre-integrated as the even shell that
+    sampling ten times finer shows. The segment table's diagonal is the LUT, so a wide TF's
+    picture barely changes."""
+    from skimage.color import deltaE_ciede2000, rgb2lab
+
+    thin = GaussianTF((
+        Gaussian(mean=0.45, width=0.004, height=0.5, color=(0.2, 0.5, 1.0)),
+        Gaussian(mean=0.7, width=0.05, height=0.5, color=(0.95, 0.95, 0.85)),
+    ))  # fmt: skip
+    cam = Camera(azimuth=75, elevation=10, zoom=1.3)
+
+    def picture(tf, **kw):
+        return VolumeRenderer(tooth, size=96, **kw).render(tf, cam)
+
+    reference = rgb2lab(picture(thin, sample_distance=0.05, preintegrated=False) / 255.0)
+    lit = reference[..., 0] > 3
+
+    def error(img):
+        return float(deltaE_ciede2000(rgb2lab(img / 255.0), reference)[lit].mean())
+
+    post = error(picture(thin, preintegrated=False))
+    pre = error(picture(thin))
+    assert pre < 0.4 * post, (pre, post)
+    assert error(picture(thin, sample_distance=1.0)) < post  # twice the step, still better
+    wide = tooth_tf()
+    d = np.abs(picture(wide).astype(int) - picture(wide, preintegrated=False).astype(int))
+    assert d.mean() < 1.0, d.mean()

@@ -182,3 +182,48 @@ def test_page_matches_server(server, gl_page, name):
     assert agree >= len(pick_at) - 1, report
     for index, whole in zip(server_picks, server_wholes, strict=True):
         assert (index is None and not whole) or index in whole
+
+
+def test_page_pre_integrates_a_thin_shell_as_the_server_does(server, gl_page):
+    """A Gaussian thinner than the values' step between samples (a shell on the tooth's
+    surface): the server classifies each segment between samples (pre-integration), and so
+    must the page, or its picture shows the rings of classifying samples alone. The page's
+    picture is nearer the server's than the server's own post-classified one is, by far; and
+    where the shell shows, both picks choose the same Gaussian (the shell is attributed its
+    part of each segment it lies in, though no sample's value shows it)."""
+    from intuitf.render import Camera, VolumeRenderer
+    from intuitf.session.views import ViewRenderer
+    from intuitf.tf import GaussianTF
+    from intuitf.volume import load_volume
+
+    name = "tooth_103x94x161_uint8.raw.gz"
+    gaussians = [(0.45, 0.004, 0.5, (0.2, 0.5, 1.0)), (0.7, 0.05, 0.5, (0.95, 0.95, 0.85))]
+    camera = CASES[name][1]
+    tf = GaussianTF.from_dict(tf_json(gaussians))
+    volume = load_volume(DATA / name)
+    cam = Camera.from_dict(camera)
+    vr = ViewRenderer(volume, device="cpu")
+    attr = vr.attribution(tf, cam, SIZE, False)
+    ys, xs = np.nonzero(attr[0] > 0.3)  # where the shell makes most of the pixel
+    rng = np.random.default_rng(3)
+    pick_at = [(int(xs[i]), int(ys[i])) for i in rng.choice(len(xs), size=6, replace=False)]
+    got = gl_page.evaluate(
+        PAGE_RENDER,
+        {"id": volume_id(server, name), "tf": tf.to_dict(), "camera": camera, "size": SIZE,
+         "shadings": [True, False], "picks": pick_at},
+    )  # fmt: skip
+    assert not gl_page.errors, gl_page.errors
+    for shading in (True, False):
+        kw = dict(size=SIZE, shading=shading, device="cpu")
+        server_img = VolumeRenderer(volume, **kw).render(tf, cam).astype(np.int16)
+        post = VolumeRenderer(volume, preintegrated=False, **kw).render(tf, cam).astype(np.int16)
+        raw = base64.b64decode(got["images"]["shaded" if shading else "unshaded"])
+        page_img = np.frombuffer(raw, dtype=np.uint8).reshape(SIZE, SIZE, 3).astype(np.int16)
+        lit = server_img.max(axis=2) > 8
+        to_server = float(np.abs(page_img - server_img)[lit].mean())
+        to_post = float(np.abs(page_img - post)[lit].mean())
+        assert np.abs(page_img - server_img).mean() <= 2.0, (shading, to_server)
+        assert to_server < 0.35 * to_post, (shading, to_server, to_post)
+    server_picks = [vr.pick(tf, cam, x, y, SIZE, False).index for x, y in pick_at]
+    agree = sum(a == b for a, b in zip(got["picks"], server_picks, strict=True))
+    assert agree >= len(pick_at) - 1, (got["picks"], server_picks)

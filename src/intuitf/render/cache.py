@@ -10,11 +10,17 @@ import numpy as np
 from intuitf.errors import RenderError
 from intuitf.render import kernels
 from intuitf.render.camera import Camera, ViewFrame
-from intuitf.render.renderer import EARLY_STOP, VolumeRenderer
+from intuitf.render.renderer import EARLY_STOP, Classification, VolumeRenderer
 from intuitf.tf.gaussian import GaussianTF
+from intuitf.tf.preintegration import premultiplied
 
 #: Gaussians whose share of a pixel's opacity is below this are left out by :meth:`pick`.
 PICK_MIN_SHARE = 0.02
+
+
+def gaussian_params(tf: GaussianTF) -> np.ndarray:
+    """(N, 3) float64: each Gaussian's mean, width and height (for the attribution kernels)."""
+    return np.array([(g.mean, g.width, g.height) for g in tf.gaussians], dtype=np.float64)
 
 
 def feature_shares(tf: GaussianTF, n_entries: int) -> np.ndarray:
@@ -196,15 +202,13 @@ class SampleCache(CacheViews):
         return int(sum(a.nbytes for a in arrays))
 
     # -- rendering ------------------------------------------------------------------------
-    def _composite(self, lut: np.ndarray) -> np.ndarray:
-        occupied = np.concatenate(([0], np.cumsum(lut[:, 3] > 0))).astype(np.int64)
+    def _composite(self, cls: Classification) -> np.ndarray:
+        lut, preint = cls.lut, self.renderer.preintegrated
         out = np.empty((self.width * self.height, 4), dtype=np.float32)
         if not self.renderer.shading:
-            premultiplied = lut.copy()
-            premultiplied[:, :3] *= premultiplied[:, 3:4]
             kernels.composite_unshaded(
-                self.offsets, self.samples, self.segmin, self.segmax, occupied, premultiplied,
-                EARLY_STOP, out,
+                self.offsets, self.samples, self.segmin, self.segmax, cls.occupied,
+                premultiplied(lut), cls.table, preint, EARLY_STOP, out,
             )  # fmt: skip
             return out.reshape(self.height, self.width, 4)
         kernels.composite(
@@ -214,8 +218,10 @@ class SampleCache(CacheViews):
             self.specular,
             self.segmin,
             self.segmax,
-            occupied,
+            cls.occupied,
             lut,
+            cls.table,
+            preint,
             self.renderer.shade_params,
             EARLY_STOP,
             out,
@@ -224,7 +230,7 @@ class SampleCache(CacheViews):
 
     def render_rgba(self, tf: GaussianTF) -> np.ndarray:
         """Premultiplied RGBA float32 (H, W, 4) of ``tf``."""
-        return self._composite(self.renderer.lut(tf))
+        return self._composite(self.renderer.classification(tf))
 
     # -- feature attribution --------------------------------------------------------------
     def attribution(self, tf: GaussianTF) -> np.ndarray:
@@ -234,17 +240,19 @@ class SampleCache(CacheViews):
         proportion to their opacity densities at that value; summed over N it equals the
         pixel's alpha from :meth:`render_rgba`.
         """
-        lut = self.renderer.lut(tf)
-        occupied = np.concatenate(([0], np.cumsum(lut[:, 3] > 0))).astype(np.int64)
+        cls = self.renderer.classification(tf)
         out = np.zeros((self.width * self.height, len(tf)), dtype=np.float32)
         kernels.attribute(
             self.offsets,
             self.samples,
             self.segmin,
             self.segmax,
-            occupied,
-            np.ascontiguousarray(lut[:, 3]),
-            feature_shares(tf, lut.shape[0]),
+            cls.occupied,
+            np.ascontiguousarray(cls.lut[:, 3]),
+            feature_shares(tf, cls.lut.shape[0]),
+            cls.table,
+            self.renderer.preintegrated,
+            gaussian_params(tf),
             EARLY_STOP,
             out,
         )

@@ -58,7 +58,7 @@ import numpy as np
 
 from intuitf.render import cuda_kernels as ck
 from intuitf.render import kernels
-from intuitf.render.cache import CacheViews, feature_shares
+from intuitf.render.cache import CacheViews, feature_shares, gaussian_params
 from intuitf.render.camera import Camera, ViewFrame
 from intuitf.render.context import RenderContext
 from intuitf.render.renderer import BLOCK_SIZE, EARLY_STOP, VolumeRenderer
@@ -96,13 +96,6 @@ class DeviceVolume:
         return self.lit
 
 
-def _occupancy(alpha: np.ndarray) -> np.ndarray:
-    """(K, L + 1) int32: entries below k with non-zero alpha, per candidate."""
-    occ = np.zeros((alpha.shape[0], alpha.shape[1] + 1), dtype=np.int32)
-    np.cumsum(alpha > 0, axis=1, out=occ[:, 1:])
-    return occ
-
-
 class CudaBackend:
     """One renderer's GPU state: picture geometry, shading constants, launches."""
 
@@ -131,9 +124,16 @@ class CudaBackend:
     def cam(self, frame: ViewFrame) -> Any:
         return cuda.to_device(frame.packed().astype(np.float32))
 
-    def luts(self, tfs: Sequence[GaussianTF]) -> np.ndarray:
-        """(K, L, 4) float32 straight-RGBA LUTs, corrected for the sample distance."""
-        return np.stack([self.renderer.lut(tf) for tf in tfs])
+    def classify(self, tfs: Sequence[GaussianTF]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The TFs' (:meth:`VolumeRenderer.classification`) stacked: (K, L, 4) float32
+        straight-RGBA LUTs, (K, P, P, 4) premultiplied pre-integrated tables (stand-ins
+        without pre-integration) and (K, L + 1) int32 occupancy."""
+        cls = [self.renderer.classification(tf) for tf in tfs]
+        return (
+            np.stack([c.lut for c in cls]),
+            np.stack([c.table for c in cls]),
+            np.stack([c.occupied for c in cls]).astype(np.int32),
+        )
 
     def _chunks(self, k: int, to8: bool) -> list[slice]:
         per = self.renderer.width * self.renderer.height * (3 if to8 else 16)
@@ -154,23 +154,30 @@ class CudaBackend:
 
     # -- direct marching ------------------------------------------------------------------
     def march(
-        self, luts: np.ndarray, frame: ViewFrame, *, nearest: bool = False, to8: bool = True
+        self,
+        tfs: Sequence[GaussianTF],
+        frame: ViewFrame,
+        *,
+        nearest: bool = False,
+        to8: bool = True,
     ) -> np.ndarray:
-        """Ray-march K LUTs: (K, H, W, 3) uint8 over the background, or (K, H, W, 4) RGBA."""
+        """Ray-march K TFs: (K, H, W, 3) uint8 over the background, or (K, H, W, 4) RGBA."""
         r = self.renderer
         lo, hi = r._block_ranges()
         cam = self.cam(frame)
         lit = self.lit()
+        luts, tables, occs = self.classify(tfs)
         parts = []
         for part in self._chunks(luts.shape[0], to8):
             lut = np.ascontiguousarray(luts[part])
-            occ = _occupancy(lut[:, :, 3])
+            occ = occs[part]
             vis = np.ascontiguousarray((occ[:, hi + 1] > occ[:, lo]).astype(np.uint8))
             k = lut.shape[0]
             out_rgba, out_rgb = self._outputs(k, to8)
             ck.march[k * self.n_blocks, ck.BLOCK](
                 self.volume.data, lit, r.shading, cuda.to_device(vis), BLOCK_SIZE,
-                cuda.to_device(lut), bool(nearest), cam, self.isp, self.dt, self.shade,
+                cuda.to_device(lut), cuda.to_device(np.ascontiguousarray(tables[part])),
+                r.preintegrated, bool(nearest), cam, self.isp, self.dt, self.shade,
                 self.t_stop, self.tiles_x, self.bg, to8, out_rgba, out_rgb,
             )  # fmt: skip
             parts.append(self._pictures(out_rgba, out_rgb, to8))
@@ -263,19 +270,23 @@ class CudaSampleCache(CacheViews):
 
     # -- rendering ------------------------------------------------------------------------
     def upload(self, tfs: Sequence[GaussianTF], to8: bool = True) -> list[tuple]:
-        """The TFs' LUTs and occupancy on the GPU, in launch-sized parts: (K, luts, occ)."""
+        """The TFs' LUTs, pre-integrated tables and occupancy on the GPU, in launch-sized
+        parts: (K, luts, tables, occ)."""
         be = self.backend
-        luts = be.luts(tfs)
+        luts, tables, occs = be.classify(tfs)
         if not self.renderer.shading:
             luts[:, :, :3] *= luts[:, :, 3:4]  # premultiplied, as composite_unshaded
         parts = []
         for part in be._chunks(luts.shape[0], to8):
             lut = np.ascontiguousarray(luts[part])
-            occ = _occupancy(lut[:, :, 3])
-            parts.append((lut.shape[0], cuda.to_device(lut), cuda.to_device(occ)))
+            parts.append((
+                lut.shape[0], cuda.to_device(lut),
+                cuda.to_device(np.ascontiguousarray(tables[part])),
+                cuda.to_device(np.ascontiguousarray(occs[part])),
+            ))  # fmt: skip
         return parts
 
-    def launch(self, k: int, luts: Any, occ: Any, to8: bool = True) -> tuple[Any, Any]:
+    def launch(self, k: int, luts: Any, tables: Any, occ: Any, to8: bool = True) -> tuple[Any, Any]:
         """Composite K uploaded LUTs in one launch; returns the (RGBA, RGB) device outputs.
 
         Asynchronous: the benchmark times it with CUDA events; :meth:`render_many` uses it.
@@ -285,15 +296,15 @@ class CudaSampleCache(CacheViews):
         out_rgba, out_rgb = be._outputs(k, to8)
         ck.composite[k * be.n_blocks, ck.BLOCK](
             self.counts, self.tile_base, self.samples, self.diffuse, self.specular, self.segmin,
-            self.segmax, occ, luts, r.shading, be.shade, be.t_stop, be.tiles_x, r.width,
-            r.height, be.bg, to8, out_rgba, out_rgb,
+            self.segmax, occ, luts, tables, r.preintegrated, r.shading, be.shade, be.t_stop,
+            be.tiles_x, r.width, r.height, be.bg, to8, out_rgba, out_rgb,
         )  # fmt: skip
         return out_rgba, out_rgb
 
     def _composite(self, tfs: Sequence[GaussianTF], to8: bool) -> np.ndarray:
         pictures = [
-            self.backend._pictures(*self.launch(k, luts, occ, to8), to8)
-            for k, luts, occ in self.upload(tfs, to8)
+            self.backend._pictures(*self.launch(k, luts, tables, occ, to8), to8)
+            for k, luts, tables, occ in self.upload(tfs, to8)
         ]
         return pictures[0] if len(pictures) == 1 else np.concatenate(pictures)
 
@@ -309,7 +320,8 @@ class CudaSampleCache(CacheViews):
         """
         be = self.backend
         r = self.renderer
-        alphas = np.ascontiguousarray(be.luts(tfs)[:, :, 3])
+        luts, _, occs = be.classify(tfs)
+        alphas = np.ascontiguousarray(luts[:, :, 3])
         checked = np.zeros(len(alphas), dtype=np.int64)
         loaded = np.zeros(len(alphas), dtype=np.int64)
         for a in range(0, len(alphas), 8):
@@ -318,7 +330,8 @@ class CudaSampleCache(CacheViews):
             reads = cuda.to_device(np.zeros((k, be.n_slots, 2), dtype=np.int32))
             ck.count_reads[k * be.n_blocks, ck.BLOCK](
                 self.counts, self.tile_base, self.samples, self.segmin, self.segmax,
-                cuda.to_device(_occupancy(alpha)), cuda.to_device(alpha), be.t_stop,
+                cuda.to_device(np.ascontiguousarray(occs[a : a + 8])), cuda.to_device(alpha),
+                be.t_stop,
                 be.tiles_x, r.width, r.height, reads,
             )  # fmt: skip
             sums = reads.copy_to_host().sum(axis=1, dtype=np.int64)
@@ -347,13 +360,16 @@ class CudaSampleCache(CacheViews):
         """Each Gaussian's share of every pixel's opacity: float32 (N, H, W)."""
         be = self.backend
         r = self.renderer
-        lut = r.lut(tf)
-        occ = _occupancy(lut[None, :, 3])[0]
+        cls = r.classification(tf)
+        lut = cls.lut
         out = cuda.to_device(np.zeros((len(tf), r.width * r.height), dtype=np.float32))
         ck.attribute[be.n_blocks, ck.BLOCK](
             self.counts, self.tile_base, self.samples, self.segmin, self.segmax,
-            cuda.to_device(occ), cuda.to_device(np.ascontiguousarray(lut[:, 3])),
-            cuda.to_device(feature_shares(tf, lut.shape[0])), be.t_stop, be.tiles_x, r.width,
-            r.height, out,
+            cuda.to_device(cls.occupied.astype(np.int32)),
+            cuda.to_device(np.ascontiguousarray(lut[:, 3])),
+            cuda.to_device(feature_shares(tf, lut.shape[0])),
+            cuda.to_device(np.ascontiguousarray(cls.table[None])), r.preintegrated,
+            cuda.to_device(gaussian_params(tf).astype(np.float32)), be.t_stop, be.tiles_x,
+            r.width, r.height, out,
         )  # fmt: skip
         return out.copy_to_host().reshape(len(tf), r.height, r.width)

@@ -262,14 +262,107 @@ def _store(out_rgba, out_rgb, to8, bg, c, p, r, g, b, tr):
 
 
 # ---------------------------------------------------------------------------------------------
+# Classification (device functions, as kernels._point, _segment, _classify, pair_entry, _entry)
+# ---------------------------------------------------------------------------------------------
+@cuda.jit(device=True)
+def _point(luts, c, x):
+    """Straight (alpha, r, g, b) at fractional LUT index ``x`` of candidate c's LUT."""
+    nl = luts.shape[1]
+    q = int(x)
+    if q > nl - 2:
+        q = nl - 2
+    elif q < 0:
+        q = 0
+    f = x - f32(q)
+    a = luts[c, q, 3] * (ONE - f) + luts[c, q + 1, 3] * f
+    if a <= ZERO:
+        return ZERO, ZERO, ZERO, ZERO
+    return (
+        a,
+        luts[c, q, 0] * (ONE - f) + luts[c, q + 1, 0] * f,
+        luts[c, q, 1] * (ONE - f) + luts[c, q + 1, 1] * f,
+        luts[c, q, 2] * (ONE - f) + luts[c, q + 1, 2] * f,
+    )
+
+
+@cuda.jit(device=True)
+def _segment(tables, c, xf, xb):
+    """Straight (alpha, r, g, b), bilinear in candidate c's premultiplied table."""
+    top = tables.shape[1] - 2
+    i = min(max(int(xf), 0), top)
+    j = min(max(int(xb), 0), top)
+    fi = xf - f32(i)
+    fj = xb - f32(j)
+    w00 = (ONE - fi) * (ONE - fj)
+    w01 = (ONE - fi) * fj
+    w10 = fi * (ONE - fj)
+    w11 = fi * fj
+    a = w00 * tables[c, i, j, 3] + w01 * tables[c, i, j + 1, 3]
+    a += w10 * tables[c, i + 1, j, 3] + w11 * tables[c, i + 1, j + 1, 3]
+    if a <= ZERO:
+        return ZERO, ZERO, ZERO, ZERO
+    r = w00 * tables[c, i, j, 0] + w01 * tables[c, i, j + 1, 0]
+    r += w10 * tables[c, i + 1, j, 0] + w11 * tables[c, i + 1, j + 1, 0]
+    g = w00 * tables[c, i, j, 1] + w01 * tables[c, i, j + 1, 1]
+    g += w10 * tables[c, i + 1, j, 1] + w11 * tables[c, i + 1, j + 1, 1]
+    b = w00 * tables[c, i, j, 2] + w01 * tables[c, i, j + 1, 2]
+    b += w10 * tables[c, i + 1, j, 2] + w11 * tables[c, i + 1, j + 1, 2]
+    return a, r / a, g / a, b / a
+
+
+@cuda.jit(device=True)
+def _pair_entry(qf, qb, nl, np_):
+    """Table entries (front, back) of two LUT entries (``kernels.pair_entry``)."""
+    if nl == np_:
+        return qf, qb
+    ratio = f32(np_ - 1) / f32(nl - 1)
+    return int(f32(qf) * ratio + HALF), int(f32(qb) * ratio + HALF)
+
+
+@cuda.jit(device=True)
+def _entry(tables, c, i, j):
+    """Straight (alpha, r, g, b) of candidate c's premultiplied table entry (i, j)."""
+    a = tables[c, i, j, 3]
+    if a <= ZERO:
+        return ZERO, ZERO, ZERO, ZERO
+    return a, tables[c, i, j, 0] / a, tables[c, i, j, 1] / a, tables[c, i, j, 2] / a
+
+
+@cuda.jit(device=True)
+def _classify(luts, tables, c, preint, nearest, vf, vb):
+    """``kernels._classify`` for candidate c."""
+    nl = luts.shape[1]
+    scale = f32(nl - 1)
+    xb = vb * scale
+    if nearest:
+        xb = f32(int(xb + HALF))
+        if preint:
+            qf = int(vf * scale + HALF)
+            i, j = _pair_entry(qf, int(xb), nl, tables.shape[1])
+            if i != j:
+                return _entry(tables, c, i, j)
+        return _point(luts, c, xb)
+    if preint:
+        pscale = f32(tables.shape[1] - 1)
+        pf = vf * pscale
+        pb = vb * pscale
+        if abs(pb - pf) >= ONE:
+            return _segment(tables, c, pf, pb)
+    return _point(luts, c, xb)
+
+
+# ---------------------------------------------------------------------------------------------
 # Direct ray marcher: K candidates per launch
 # ---------------------------------------------------------------------------------------------
 @cuda.jit(fastmath=True, cache=True)
 def march(
-    data, lit, shading, vis, bsize, luts, nearest, cam, isp, dt, shade, t_stop, tiles_x, bg,
-    to8, out_rgba, out_rgb,
+    data, lit, shading, vis, bsize, luts, tables, preint, nearest, cam, isp, dt, shade, t_stop,
+    tiles_x, bg, to8, out_rgba, out_rgb,
 ):  # fmt: skip
-    """:func:`kernels.march` for candidate c (LUT ``luts[c]``, visible blocks ``vis[c]``).
+    """:func:`kernels.march` for candidate c (LUT ``luts[c]``, pre-integrated table
+    ``tables[c]`` when ``preint``, visible blocks ``vis[c]``): the same samples classified the
+    same way, the same segments kept where blocks are skipped (no 2³ grid: a sample it would
+    pass over adds nothing).
 
     ``cam``, ``isp`` (1 / spacing), ``shade`` and ``bg`` are float32 arrays, ``dt`` and
     ``t_stop`` float32 scalars. Writes ``out_rgb[c, pixel]`` (uint8) when ``to8``, else
@@ -283,8 +376,6 @@ def march(
         return
     nz, ny, nx = data.shape
     nbz, nby, nbx = vis.shape[1], vis.shape[2], vis.shape[3]
-    nl = luts.shape[1]
-    scale = f32(nl - 1)
     ka, kd, ks, shin = shade[0], shade[1], shade[2], shade[3]
     lx, ly, lz = -cam[3], -cam[4], -cam[5]
     oxi, oyi, ozi, dxi, dyi, dzi, dx, dy, dz = _index_ray(cam, isp, i, j)
@@ -297,6 +388,9 @@ def march(
     if t1 >= t0:
         n = int((t1 - t0) / dt) + 1
         k = 0
+        have = False  # vf holds sample k-1's value
+        carry = False  # sample k-1 lay in a visible block
+        vf = ZERO
         while k < n:
             t = t0 + f32(k) * dt
             px = oxi + t * dxi
@@ -305,8 +399,10 @@ def march(
             bx = min(max(int(px), 0) // bsize, nbx - 1)
             by = min(max(int(py), 0) // bsize, nby - 1)
             bz = min(max(int(pz), 0) // bsize, nbz - 1)
-            if vis[c, bz, by, bx] == 0:
-                # Jump to the first sample at or after the block's exit.
+            visible = vis[c, bz, by, bx] != 0
+            kn = k + 1
+            if not visible:
+                # The first sample at or after the block's exit.
                 tex = BIG
                 if dxi > TINY:
                     tex = min(tex, (f32((bx + 1) * bsize) - oxi) / dxi)
@@ -321,25 +417,28 @@ def march(
                 elif dzi < -TINY:
                     tex = min(tex, (f32(bz * bsize) - ozi) / dzi)
                 kn = int(math.ceil((tex - t0) / dt - SKIP_EPS))
-                k = kn if kn > k else k + 1
-                continue
+                if kn <= k:
+                    kn = k + 1
+                if not carry:
+                    have = False
+                    k = kn
+                    continue
             ci, cj, ck, fx, fy, fz, v = _sample(
                 data, lit, shading, px, py, pz, nx, ny, nz, VALUE_SCALE, VALUE_OFFSET
             )
-            x = v * scale
-            if nearest:
-                x = f32(int(x + HALF))
-            q = int(x)
-            if q > nl - 2:
-                q = nl - 2
-            elif q < 0:
-                q = 0
-            f = x - f32(q)
-            a = luts[c, q, 3] * (ONE - f) + luts[c, q + 1, 3] * f
+            if preint and not have:
+                vf = v
+                if k > 0:
+                    tp = t - dt
+                    _, _, _, _, _, _, vf = _sample(
+                        data, lit, shading, oxi + tp * dxi, oyi + tp * dyi, ozi + tp * dzi,
+                        nx, ny, nz, VALUE_SCALE, VALUE_OFFSET,
+                    )  # fmt: skip
+            a, cr, cg, cb = _classify(luts, tables, c, preint, nearest, vf, v)
+            vf = v
+            have = True
+            carry = preint and visible
             if a > ZERO:
-                cr = luts[c, q, 0] * (ONE - f) + luts[c, q + 1, 0] * f
-                cg = luts[c, q, 1] * (ONE - f) + luts[c, q + 1, 1] * f
-                cb = luts[c, q, 2] * (ONE - f) + luts[c, q + 1, 2] * f
                 if shading:
                     gx, gy, gz = _gradient_at(lit, ci, cj, ck, fx, fy, fz)
                     ndl, sp = _shade_terms(
@@ -356,7 +455,11 @@ def march(
                 tr *= ONE - a
                 if tr < t_stop:
                     break
-            k += 1
+            if not visible:
+                # The segment out of the visible blocks is classified; the rest of this
+                # invisible block is skipped.
+                have = kn == k + 1
+            k = kn
     _store(out_rgba, out_rgb, to8, bg, c, i * width + j, r, g, b, tr)
 
 
@@ -411,6 +514,7 @@ def fill_samples(
     t0 = t0s[slot]
     lo = 0
     hi = 0
+    prev = 0
     for k in range(n):
         t = t0 + f32(k) * dt
         px = oxi + t * dxi
@@ -431,8 +535,12 @@ def fill_samples(
             specular[at] = int(sp * U8 + HALF)
         r = k % SEG
         if r == 0:
+            # The segment's range holds the sample before it too (``kernels.segment_minmax``).
             lo = q
             hi = q
+            if k > 0:
+                lo = min(lo, prev)
+                hi = max(hi, prev)
         else:
             lo = min(lo, q)
             hi = max(hi, q)
@@ -440,6 +548,7 @@ def fill_samples(
             s = sbase + (k // SEG) * WARP
             segmin[s] = lo
             segmax[s] = hi
+        prev = q
 
 
 # ---------------------------------------------------------------------------------------------
@@ -447,8 +556,8 @@ def fill_samples(
 # ---------------------------------------------------------------------------------------------
 @cuda.jit(fastmath=True, cache=True)
 def composite(
-    counts, tile_base, samples, diffuse, specular, segmin, segmax, occupied, luts, shading,
-    shade, t_stop, tiles_x, width, height, bg, to8, out_rgba, out_rgb,
+    counts, tile_base, samples, diffuse, specular, segmin, segmax, occupied, luts, tables,
+    preint, shading, shade, t_stop, tiles_x, width, height, bg, to8, out_rgba, out_rgb,
 ):  # fmt: skip
     """:func:`kernels.composite` (shaded, straight LUT) or :func:`kernels.composite_unshaded`
     (premultiplied LUT) of candidate c for the slot's ray.
@@ -484,19 +593,37 @@ def composite(
             for k in range(s * SEG, min(s * SEG + SEG, n)):
                 at = base + k * WARP
                 q = int(samples[at])
+                # Candidate c's LUT entry, or the segment from the previous sample (straight
+                # colour when shading, premultiplied otherwise, as the LUTs).
                 a = luts[c, q, 3]
+                c0 = luts[c, q, 0]
+                c1 = luts[c, q, 1]
+                c2 = luts[c, q, 2]
+                if preint and k > 0:
+                    qf = int(samples[at - WARP])
+                    if qf != q:
+                        ti, tj = _pair_entry(qf, q, luts.shape[1], tables.shape[1])
+                        if ti != tj:
+                            a = tables[c, ti, tj, 3]
+                            c0 = tables[c, ti, tj, 0]
+                            c1 = tables[c, ti, tj, 1]
+                            c2 = tables[c, ti, tj, 2]
+                            if shading and a > ZERO:
+                                c0 /= a
+                                c1 /= a
+                                c2 /= a
                 if a > ZERO:
                     if shading:
                         lit = ka + kd * (f32(diffuse[at]) * INV255)
                         sp = ks * (f32(specular[at]) * INV255)
                         w = tr * a
-                        r += w * min(ONE, luts[c, q, 0] * lit + sp)
-                        g += w * min(ONE, luts[c, q, 1] * lit + sp)
-                        b += w * min(ONE, luts[c, q, 2] * lit + sp)
+                        r += w * min(ONE, c0 * lit + sp)
+                        g += w * min(ONE, c1 * lit + sp)
+                        b += w * min(ONE, c2 * lit + sp)
                     else:
-                        r += tr * luts[c, q, 0]
-                        g += tr * luts[c, q, 1]
-                        b += tr * luts[c, q, 2]
+                        r += tr * c0
+                        g += tr * c1
+                        b += tr * c2
                     tr *= ONE - a
                     if tr < t_stop:
                         done = True
@@ -507,10 +634,11 @@ def composite(
 
 @cuda.jit(fastmath=True, cache=True)
 def attribute(
-    counts, tile_base, samples, segmin, segmax, occupied, alpha, share, t_stop, tiles_x,
-    width, height, out,
+    counts, tile_base, samples, segmin, segmax, occupied, alpha, share, table, preint, gauss,
+    t_stop, tiles_x, width, height, out,
 ):  # fmt: skip
-    """:func:`kernels.attribute` for one TF into ``out`` (N, n_pixels), zero on entry."""
+    """:func:`kernels.attribute` for one TF into ``out`` (N, n_pixels), zero on entry
+    (``table`` its (1, P, P, 4) pre-integrated table, ``gauss`` (N, 3) float32)."""
     slot = cuda.grid(1)
     if slot >= counts.shape[0]:
         return
@@ -536,15 +664,44 @@ def attribute(
             for k in range(s * SEG, min(s * SEG + SEG, n)):
                 q = int(samples[base + k * WARP])
                 a = alpha[q]
+                ti = 0
+                tj = 0
+                if preint and k > 0:
+                    qf = int(samples[base + (k - 1) * WARP])
+                    if qf != q:
+                        ti, tj = _pair_entry(qf, q, alpha.shape[0], table.shape[1])
+                        if ti != tj:
+                            a = table[0, ti, tj, 3]
                 if a > ZERO:
                     w = tr * a
-                    for m in range(ng):
-                        out[m, p] += w * share[q, m]
+                    total = ZERO
+                    lo_v = ZERO
+                    hi_v = ZERO
+                    if ti != tj:
+                        pscale = f32(table.shape[1] - 1)
+                        lo_v = f32(min(ti, tj)) / pscale
+                        hi_v = f32(max(ti, tj)) / pscale
+                        for m in range(ng):
+                            total += _mass(gauss, m, lo_v, hi_v)
+                    if total > ZERO:
+                        for m in range(ng):
+                            out[m, p] += w * _mass(gauss, m, lo_v, hi_v) / total
+                    else:
+                        for m in range(ng):
+                            out[m, p] += w * share[q, m]
                     tr *= ONE - a
                     if tr < t_stop:
                         done = True
                         break
         s += 1
+
+
+@cuda.jit(device=True)
+def _mass(gauss, m, lo, hi):
+    """``kernels._mass``: Gaussian m's opacity density over [lo, hi], up to a common factor."""
+    mean, w, h = gauss[m, 0], gauss[m, 1], gauss[m, 2]
+    k = ONE / (w * f32(1.4142135623730951))
+    return h * w * (math.erf((hi - mean) * k) - math.erf((lo - mean) * k))
 
 
 @cuda.jit(fastmath=True, cache=True)

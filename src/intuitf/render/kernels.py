@@ -301,12 +301,114 @@ def _half_vector(lx, ly, lz, dx, dy, dz):
 
 
 # ---------------------------------------------------------------------------------------------
+# Classification
+# ---------------------------------------------------------------------------------------------
+@njit(cache=True, fastmath=True, inline="always")
+def _point(lut, x):
+    """Post-classification: straight (alpha, r, g, b) at fractional LUT index ``x``, linear
+    between the two entries around it."""
+    nl = lut.shape[0]
+    q = int(x)
+    if q > nl - 2:
+        q = nl - 2
+    elif q < 0:
+        q = 0
+    f = x - q
+    a = lut[q, 3] * (1.0 - f) + lut[q + 1, 3] * f
+    if a <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    return (
+        a,
+        lut[q, 0] * (1.0 - f) + lut[q + 1, 0] * f,
+        lut[q, 1] * (1.0 - f) + lut[q + 1, 1] * f,
+        lut[q, 2] * (1.0 - f) + lut[q + 1, 2] * f,
+    )
+
+
+@njit(cache=True, fastmath=True, inline="always")
+def _segment(ptable, xf, xb):
+    """Pre-integrated classification of the segment from fractional table index ``xf`` (front
+    sample) to ``xb`` (back sample): straight (alpha, r, g, b), bilinear in the premultiplied
+    table (:func:`intuitf.tf.preintegration.preintegrated_table`)."""
+    top = ptable.shape[0] - 2
+    i = min(max(int(xf), 0), top)
+    j = min(max(int(xb), 0), top)
+    fi = xf - i
+    fj = xb - j
+    w00 = (1.0 - fi) * (1.0 - fj)
+    w01 = (1.0 - fi) * fj
+    w10 = fi * (1.0 - fj)
+    w11 = fi * fj
+    a = w00 * ptable[i, j, 3] + w01 * ptable[i, j + 1, 3]
+    a += w10 * ptable[i + 1, j, 3] + w11 * ptable[i + 1, j + 1, 3]
+    if a <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    out_r = w00 * ptable[i, j, 0] + w01 * ptable[i, j + 1, 0]
+    out_r += w10 * ptable[i + 1, j, 0] + w11 * ptable[i + 1, j + 1, 0]
+    out_g = w00 * ptable[i, j, 1] + w01 * ptable[i, j + 1, 1]
+    out_g += w10 * ptable[i + 1, j, 1] + w11 * ptable[i + 1, j + 1, 1]
+    out_b = w00 * ptable[i, j, 2] + w01 * ptable[i, j + 1, 2]
+    out_b += w10 * ptable[i + 1, j, 2] + w11 * ptable[i + 1, j + 1, 2]
+    return a, out_r / a, out_g / a, out_b / a
+
+
+@njit(cache=True, fastmath=True, inline="always")
+def _classify(lut, ptable, preint, nearest, vf, vb):
+    """Straight (alpha, r, g, b) of the sample of value ``vb`` whose ray came from the sample
+    of value ``vf`` (equal for a ray's first sample).
+
+    Without ``preint``, post-classification at ``vb`` (the LUT, linear between entries; with
+    ``nearest``, its nearest entry). With ``preint``, the segment ``vf -> vb`` from the
+    pre-integrated table when the two values lie at least one table entry apart, else the LUT
+    at ``vb`` (which the table's diagonal equals; wider data keeps the LUT's finer entries).
+    With ``nearest`` both values are rounded to their LUT entries first, then those to table
+    entries, exactly as the sample cache does (:func:`pair_entry`).
+    """
+    scale = lut.shape[0] - 1.0
+    xb = vb * scale
+    if nearest:
+        xb = float(int(xb + 0.5))
+        if preint:
+            xf = float(int(vf * scale + 0.5))
+            i, j = pair_entry(xf, xb, scale, ptable.shape[0] - 1.0)
+            if i != j:
+                return _entry(ptable, i, j)
+        return _point(lut, xb)
+    if preint:
+        pscale = ptable.shape[0] - 1.0
+        pf = vf * pscale
+        pb = vb * pscale
+        if abs(pb - pf) >= 1.0:
+            return _segment(ptable, pf, pb)
+    return _point(lut, xb)
+
+
+@njit(cache=True, fastmath=True, inline="always")
+def pair_entry(qf, qb, scale, pscale):
+    """Table entries (front, back) of two samples' LUT entries ``qf``, ``qb`` (as floats):
+    the nearest entries of the table's coarser grid (the same grid for 8-bit data)."""
+    if scale == pscale:
+        return int(qf), int(qb)
+    r = pscale / scale
+    return int(qf * r + 0.5), int(qb * r + 0.5)
+
+
+@njit(cache=True, fastmath=True, inline="always")
+def _entry(ptable, i, j):
+    """Straight (alpha, r, g, b) of premultiplied table entry (i, j)."""
+    a = ptable[i, j, 3]
+    if a <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    return a, ptable[i, j, 0] / a, ptable[i, j, 1] / a, ptable[i, j, 2] / a
+
+
+# ---------------------------------------------------------------------------------------------
 # Direct ray marcher
 # ---------------------------------------------------------------------------------------------
 @njit(parallel=True, cache=True, fastmath=True)
 def march(
-    data, lit, shading, vis, bsize, fine, fine_shift, lut, nearest, cam, spacing, dt,
-    shade_params, t_stop, out,
+    data, lit, shading, vis, bsize, fine, fine_shift, lut, ptable, preint, nearest, cam,
+    spacing, dt, shade_params, t_stop, out,
 ):  # fmt: skip
     """Render every pixel of ``cam`` into ``out`` (n_pixels, 4) premultiplied RGBA.
 
@@ -322,13 +424,20 @@ def march(
     are read from ``lit``, the shading voxels (:func:`value_codes`); else values from ``data``.
     ``bsize`` is a power of two. The picture is walked in tiles of :data:`TILE` pixels,
     handed to the threads interleaved (:func:`row_stride`).
+
+    With ``preint``, each sample is classified with the segment from the ray's previous sample
+    (:func:`_classify`, ``ptable`` the premultiplied pre-integrated table). Skipping then
+    keeps every segment that can show: a sample whose block is invisible is still classified
+    when the sample before it lay in a visible block (the segment leaving a structure crosses
+    the values of its surface), and the first sample after a skipped stretch reads the value
+    of the one before it (the segment entering a structure). ``vis`` and ``fine`` mark a
+    block visible when its value range can show in the table (the LUT's occupancy widened by
+    one table entry).
     """
     nz, ny, nx = data.shape
     nbz, nby, nbx = vis.shape
     width = int(cam[17])
     height = int(cam[18])
-    nl = lut.shape[0]
-    scale = nl - 1.0
     isx = 1.0 / spacing[0]
     isy = 1.0 / spacing[1]
     isz = 1.0 / spacing[2]
@@ -358,6 +467,11 @@ def march(
                     n = int((t1 - t0) / dt) + 1
                     k = 0
                     done = False
+                    # With preint: ``vf`` holds sample k-1's value when ``have``; ``carry``:
+                    # sample k-1 lay in a visible block, so sample k's segment can show.
+                    have = False
+                    carry = False
+                    vf = 0.0
                     while k < n and not done:
                         # Block by block, as the page's shader: a skipped block costs one
                         # lookup, a visible one runs its samples without looking up its
@@ -388,36 +502,43 @@ def march(
                         kn = int(math.ceil((tex - t0) / dt - 1e-4))
                         if kn <= k:
                             kn = k + 1
-                        if vis[bz, by, bx] == 0:
+                        kend = min(kn, n)
+                        block_visible = vis[bz, by, bx] != 0
+                        if not block_visible and not carry:
+                            have = False
                             k = kn
                             continue
-                        kend = min(kn, n)
                         while k < kend:
                             t = t0 + k * dt
                             px = oxi + t * dxi
                             py = oyi + t * dyi
                             pz = ozi + t * dzi
-                            fbx = min(int(px) >> fine_shift, nfx)
-                            fby = min(int(py) >> fine_shift, nfy)
-                            fbz = min(int(pz) >> fine_shift, nfz)
-                            if fine[fbz, fby, fbx] == 0:
+                            visible = block_visible
+                            if visible:
+                                fbx = min(int(px) >> fine_shift, nfx)
+                                fby = min(int(py) >> fine_shift, nfy)
+                                fbz = min(int(pz) >> fine_shift, nfz)
+                                visible = fine[fbz, fby, fbx] != 0
+                            if not visible and not carry:
+                                have = False
                                 k += 1
+                                if not block_visible:
+                                    break
                                 continue
                             gx, gy, gz, v = _sample(data, lit, shading, px, py, pz, nx, ny, nz)
-                            x = v * scale
-                            if nearest:
-                                x = float(int(x + 0.5))
-                            q = int(x)
-                            if q > nl - 2:
-                                q = nl - 2
-                            elif q < 0:
-                                q = 0
-                            f = x - q
-                            a = lut[q, 3] * (1.0 - f) + lut[q + 1, 3] * f
+                            if preint and not have:
+                                vf = v
+                                if k > 0:
+                                    tp = t - dt
+                                    _, _, _, vf = _sample(
+                                        data, lit, shading, oxi + tp * dxi, oyi + tp * dyi,
+                                        ozi + tp * dzi, nx, ny, nz,
+                                    )  # fmt: skip
+                            a, cr, cg, cb = _classify(lut, ptable, preint, nearest, vf, v)
+                            vf = v
+                            have = True
+                            carry = preint and visible
                             if a > 0.0:
-                                cr = lut[q, 0] * (1.0 - f) + lut[q + 1, 0] * f
-                                cg = lut[q, 1] * (1.0 - f) + lut[q + 1, 1] * f
-                                cb = lut[q, 2] * (1.0 - f) + lut[q + 1, 2] * f
                                 if shading:
                                     # Index-space differences divided by spacing: the world
                                     # gradient (up to a common scale).
@@ -437,6 +558,13 @@ def march(
                                     done = True
                                     break
                             k += 1
+                            if not visible:
+                                # The segment out of the visible blocks is classified: the
+                                # rest of an invisible block is skipped.
+                                if not block_visible:
+                                    k = kn
+                                    have = False
+                                    break
                 p = i * width + j
                 out[p, 0] = r
                 out[p, 1] = g
@@ -506,15 +634,17 @@ def fill_samples(
 
 @njit(parallel=True, cache=True)
 def segment_minmax(samples, segmin, segmax):
-    """Min and max quantised value of each run of 2**SEG_SHIFT consecutive samples."""
+    """Min and max quantised value of each run of 2**SEG_SHIFT consecutive samples and the
+    sample before it (so that a segment from the previous sample, pre-integrated, lies in the
+    range; the sample before may be another ray's, which only widens the range)."""
     n = samples.shape[0]
     seg = 1 << SEG_SHIFT
     for g in prange(segmin.shape[0]):
         a = g * seg
         b = min(a + seg, n)
-        lo = samples[a]
-        hi = samples[a]
-        for k in range(a + 1, b):
+        lo = samples[max(a - 1, 0)]
+        hi = lo
+        for k in range(a, b):
             v = samples[k]
             if v < lo:
                 lo = v
@@ -525,12 +655,16 @@ def segment_minmax(samples, segmin, segmax):
 
 
 @njit(parallel=True, cache=True, fastmath=True)
-def composite_unshaded(offsets, samples, segmin, segmax, occupied, plut, t_stop, out):
+def composite_unshaded(
+    offsets, samples, segmin, segmax, occupied, plut, ptable, preint, t_stop, out
+):  # fmt: skip
     """:func:`composite` without shading, from a premultiplied LUT (r·a, g·a, b·a, a).
 
     Same result; the inner loop has no branch on empty samples (a zero-alpha entry adds
     nothing), which is what makes it faster on the per-candidate path.
     """
+    scale = plut.shape[0] - 1.0
+    pscale = ptable.shape[0] - 1.0
     for p in prange(offsets.shape[0] - 1):
         s0 = offsets[p]
         s1 = offsets[p + 1]
@@ -547,6 +681,16 @@ def composite_unshaded(offsets, samples, segmin, segmax, occupied, plut, t_stop,
                 continue
             for kk in range(k, e):
                 q = samples[kk]
+                if preint and kk > s0 and samples[kk - 1] != q:
+                    i, j = pair_entry(float(samples[kk - 1]), float(q), scale, pscale)
+                    if i != j:
+                        r += tr * ptable[i, j, 0]
+                        g += tr * ptable[i, j, 1]
+                        b += tr * ptable[i, j, 2]
+                        tr *= 1.0 - ptable[i, j, 3]
+                        if tr < t_stop:
+                            break
+                        continue
                 r += tr * plut[q, 0]
                 g += tr * plut[q, 1]
                 b += tr * plut[q, 2]
@@ -564,8 +708,8 @@ def composite_unshaded(offsets, samples, segmin, segmax, occupied, plut, t_stop,
 
 @njit(parallel=True, cache=True, fastmath=True)
 def composite(
-    offsets, samples, diffuse, specular, segmin, segmax, occupied, lut, shade_params,
-    t_stop, out,
+    offsets, samples, diffuse, specular, segmin, segmax, occupied, lut, ptable, preint,
+    shade_params, t_stop, out,
 ):  # fmt: skip
     """Render one TF, shaded, from a sample cache into ``out`` (n_rays, 4) premultiplied RGBA.
 
@@ -573,9 +717,14 @@ def composite(
 
     ``occupied[k]`` counts LUT entries below k with non-zero alpha, so a segment whose values
     lie in [lo, hi] is empty when ``occupied[hi + 1] == occupied[lo]`` and is skipped whole.
+
+    With ``preint``, a sample is classified with the segment from the ray's previous one, as
+    :func:`march` with ``nearest`` does (:func:`_classify`).
     """
     ka, kd, ks = shade_params[0], shade_params[1], shade_params[2]
     inv = 1.0 / 255.0
+    scale = lut.shape[0] - 1.0
+    pscale = ptable.shape[0] - 1.0
     for p in prange(offsets.shape[0] - 1):
         s0 = offsets[p]
         s1 = offsets[p + 1]
@@ -593,13 +742,17 @@ def composite(
                 continue
             for kk in range(k, e):
                 q = samples[kk]
-                a = lut[q, 3]
+                a, cr, cg, cb = lut[q, 3], lut[q, 0], lut[q, 1], lut[q, 2]
+                if preint and kk > s0 and samples[kk - 1] != q:
+                    i, j = pair_entry(float(samples[kk - 1]), float(q), scale, pscale)
+                    if i != j:
+                        a, cr, cg, cb = _entry(ptable, i, j)
                 if a > 0.0:
                     lit = ka + kd * (diffuse[kk] * inv)
                     sp = ks * (specular[kk] * inv)
-                    cr = min(1.0, lut[q, 0] * lit + sp)
-                    cg = min(1.0, lut[q, 1] * lit + sp)
-                    cb = min(1.0, lut[q, 2] * lit + sp)
+                    cr = min(1.0, cr * lit + sp)
+                    cg = min(1.0, cg * lit + sp)
+                    cb = min(1.0, cb * lit + sp)
                     w = tr * a
                     r += w * cr
                     g += w * cg
@@ -616,14 +769,24 @@ def composite(
 
 
 @njit(parallel=True, cache=True, fastmath=True)
-def attribute(offsets, samples, segmin, segmax, occupied, alpha, share, t_stop, out):
+def attribute(
+    offsets, samples, segmin, segmax, occupied, alpha, share, ptable, preint, gauss, t_stop,
+    out,
+):  # fmt: skip
     """Each Gaussian's part of every ray's accumulated opacity, into ``out`` (n_rays, N).
 
     At each sample the composited opacity ``T * a`` is split in proportion to ``share``
     (L, N): the Gaussians' opacity densities at that value, normalised to sum to one.
     The parts of a ray therefore sum to its alpha (up to float rounding).
+
+    With ``preint``, a sample classified by its segment from the previous one (as
+    :func:`composite` does) splits the segment's opacity in proportion to each Gaussian's
+    integral over the segment's values (``gauss`` (N, 3): mean, width, height), so a thin
+    Gaussian the segment crosses gets its part though neither sample's value shows it.
     """
     ng = share.shape[1]
+    scale = alpha.shape[0] - 1.0
+    pscale = ptable.shape[0] - 1.0
     for p in prange(offsets.shape[0] - 1):
         s0 = offsets[p]
         s1 = offsets[p + 1]
@@ -639,15 +802,40 @@ def attribute(offsets, samples, segmin, segmax, occupied, alpha, share, t_stop, 
             for kk in range(k, e):
                 q = samples[kk]
                 a = alpha[q]
+                i = j = 0
+                lo = hi = 0.0
+                if preint and kk > s0 and samples[kk - 1] != q:
+                    i, j = pair_entry(float(samples[kk - 1]), float(q), scale, pscale)
+                    if i != j:
+                        a = ptable[i, j, 3]
                 if a > 0.0:
                     w = tr * a
-                    for c in range(ng):
-                        out[p, c] += w * share[q, c]
+                    total = 0.0
+                    if i != j:
+                        lo = min(i, j) / pscale
+                        hi = max(i, j) / pscale
+                        for c in range(ng):
+                            total += _mass(gauss, c, lo, hi)
+                    if total > 0.0:
+                        for c in range(ng):
+                            out[p, c] += w * _mass(gauss, c, lo, hi) / total
+                    else:
+                        for c in range(ng):
+                            out[p, c] += w * share[q, c]
                     tr *= 1.0 - a
                     if tr < t_stop:
                         done = True
                         break
             k = e
+
+
+@njit(cache=True, fastmath=True, inline="always")
+def _mass(gauss, c, lo, hi):
+    """Gaussian c's opacity density integrated over [lo, hi], up to a factor common to all
+    Gaussians (sqrt(pi / 2)): ``height * width * (erf(z_hi) - erf(z_lo))``."""
+    m, w, h = gauss[c, 0], gauss[c, 1], gauss[c, 2]
+    k = 1.0 / (w * 1.4142135623730951)
+    return h * w * (math.erf((hi - m) * k) - math.erf((lo - m) * k))
 
 
 @njit(parallel=True, cache=True)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -14,6 +15,7 @@ from intuitf.render.camera import Camera, ViewFrame
 from intuitf.render.context import BLOCK_SIZE, FINE_BLOCK_SIZE, RenderContext, render_context
 from intuitf.render.device import select_device
 from intuitf.tf.gaussian import GaussianTF
+from intuitf.tf.preintegration import TABLE_SIZE, preintegrated_table
 from intuitf.volume.volume import Volume
 
 if TYPE_CHECKING:
@@ -32,7 +34,27 @@ MAX_IMAGE_SIDE = 4096
 #: a frame under load, for little work). A generation's pictures keep the kernel.
 NUMPY_COMPOSITE_PIXELS = 512 * 512
 
-__all__ = ["BLOCK_SIZE", "VolumeRenderer"]
+__all__ = ["BLOCK_SIZE", "Classification", "VolumeRenderer"]
+
+#: What kernels get for the table when a renderer does not pre-integrate (never read).
+_NO_TABLE = np.zeros((2, 2, 4), dtype=np.float32)
+
+
+@dataclass(frozen=True)
+class Classification:
+    """How a renderer's kernels classify samples for one TF.
+
+    ``lut`` (L, 4) is the straight-RGBA LUT corrected for the sample distance; ``table``
+    (P, P, 4) the premultiplied pre-integrated table (:mod:`intuitf.tf.preintegration`), a
+    stand-in when the renderer does not pre-integrate; ``occupied`` (L + 1) counts the LUT
+    entries below each index where a sample can show (with pre-integration, within one table
+    entry of a visible one), so that a value range ``[lo, hi]`` can show nothing when
+    ``occupied[hi + 1] == occupied[lo]``: what empty-space skipping asks.
+    """
+
+    lut: np.ndarray
+    table: np.ndarray
+    occupied: np.ndarray
 
 
 def _parse_size(size: int | Sequence[int]) -> tuple[int, int]:
@@ -69,10 +91,14 @@ class VolumeRenderer:
     Shading is Blinn–Phong with a two-sided headlight: ``ambient``, ``diffuse``, ``specular``
     and ``shininess`` set it, ``shading=False`` turns it off. ``background`` is RGB in [0, 1].
 
-    :meth:`render` ray-marches every sample (trilinear interpolation, post-classification with
-    linear LUT interpolation, front-to-back compositing, early ray termination, empty-space
-    skipping over 8³ blocks, and inside visible ones samples passed over in 2³ blocks the TF
-    cannot see). :meth:`sample_cache` samples the volume once for a camera so that
+    :meth:`render` ray-marches every sample (trilinear interpolation, front-to-back
+    compositing, early ray termination, empty-space skipping over 8³ blocks, and inside
+    visible ones samples passed over in 2³ blocks the TF cannot see). Each sample is classified
+    with the segment from the previous one, from a pre-integrated table
+    (:mod:`intuitf.tf.preintegration`): a Gaussian thinner than the values' step between two
+    samples shows as the even shell it is, not as rings. ``preintegrated=False`` classifies
+    each sample by its own value alone (post-classification with linear LUT interpolation,
+    as VTK does). :meth:`sample_cache` samples the volume once for a camera so that
     many TFs can be rendered cheaply (see :class:`SampleCache`); :meth:`render_many` renders a
     whole population through one.
 
@@ -95,6 +121,7 @@ class VolumeRenderer:
         shading: bool = True,
         background: Sequence[float] = (0.0, 0.0, 0.0),
         sample_distance: float = 0.5,
+        preintegrated: bool = True,
         ambient: float = 0.3,
         diffuse: float = 0.7,
         specular: float = 0.25,
@@ -119,6 +146,9 @@ class VolumeRenderer:
         self.shading = bool(shading)
         self.background = _parse_background(background)
         self.sample_distance = sd
+        #: Whether samples are classified by the segment from the previous one
+        #: (:mod:`intuitf.tf.preintegration`) instead of their own value alone.
+        self.preintegrated = bool(preintegrated)
         self.shade_params = np.array([ambient, diffuse, specular, shininess], dtype=np.float64)
         # Geometry is measured in units of the smallest spacing (one voxel), so the opacity
         # unit length is 1 and the world step equals sample_distance.
@@ -153,6 +183,24 @@ class VolumeRenderer:
         table[table[:, 3] < ALPHA_EPSILON, 3] = 0.0
         return np.ascontiguousarray(table, dtype=np.float32)
 
+    def classification(self, tf: GaussianTF) -> Classification:
+        """Everything the kernels classify samples with for ``tf`` (:class:`Classification`)."""
+        lut = self.lut(tf)
+        shows = lut[:, 3] > 0
+        if self.preintegrated:
+            table = preintegrated_table(
+                tf, self.sample_distance, TABLE_SIZE, ALPHA_EPSILON, premultiply=True
+            )
+            # A segment's table entry can show the TF up to one table entry beyond its two
+            # values (rounded, or interpolated, onto the table's grid): a value range counts
+            # as visible when the TF shows within that reach of it.
+            reach = -(-(lut.shape[0] - 1) // (TABLE_SIZE - 1))
+            shows = np.convolve(shows, np.ones(2 * reach + 1), mode="same") > 0
+        else:
+            table = _NO_TABLE
+        occupied = np.concatenate(([0], np.cumsum(shows))).astype(np.int64)
+        return Classification(lut, np.ascontiguousarray(table, np.float32), occupied)
+
     def gradient(self) -> np.ndarray:
         """Int16 central-difference gradient (z, y, x, 3) of the volume (its context's)."""
         return self.context.gradient()
@@ -167,10 +215,10 @@ class VolumeRenderer:
         """LUT index range (lo, hi) each empty-space block's samples can take."""
         return self.context.block_ranges(self.lut_size)
 
-    def _visible_blocks(self, lut: np.ndarray, bsize: int) -> np.ndarray:
-        """uint8 per block of ``bsize`` cells: 1 where ``lut`` can show one of its samples."""
+    def _visible_blocks(self, occupied: np.ndarray, bsize: int) -> np.ndarray:
+        """uint8 per block of ``bsize`` cells: 1 where a sample can show (``occupied``:
+        :attr:`Classification.occupied`)."""
         lo, hi = self.context.block_ranges(self.lut_size, bsize)
-        occupied = np.concatenate(([0], np.cumsum(lut[:, 3] > 0))).astype(np.int64)
         vis = np.empty(lo.shape, dtype=np.uint8)
         kernels.visible_blocks(lo.ravel(), hi.ravel(), occupied, vis.reshape(-1))
         return vis
@@ -214,21 +262,23 @@ class VolumeRenderer:
         ``nearest=True`` classifies each sample by its nearest LUT entry instead of
         interpolating between entries: the sample cache's rule, for checking it.
         """
-        lut = self.lut(tf)
         if self.device == "cuda":
             frame = self.frame(camera)
-            return self._cuda_backend().march(lut[None], frame, nearest=nearest, to8=False)[0]
+            return self._cuda_backend().march([tf], frame, nearest=nearest, to8=False)[0]
+        cls = self.classification(tf)
         frame = self.frame(camera)
         out = np.empty((self.width * self.height, 4), dtype=np.float32)
         kernels.march(
             self.volume.data,
             self._shading_voxels(),
             self.shading,
-            self._visible_blocks(lut, BLOCK_SIZE),
+            self._visible_blocks(cls.occupied, BLOCK_SIZE),
             BLOCK_SIZE,
-            self._visible_blocks(lut, FINE_BLOCK_SIZE),
+            self._visible_blocks(cls.occupied, FINE_BLOCK_SIZE),
             int(FINE_BLOCK_SIZE).bit_length() - 1,
-            lut,
+            cls.lut,
+            cls.table,
+            self.preintegrated,
             bool(nearest),
             frame.packed(),
             self._spacing,
@@ -242,7 +292,7 @@ class VolumeRenderer:
     def render(self, tf: GaussianTF, camera: Camera | None = None) -> np.ndarray:
         """RGB uint8 (H, W, 3) of ``tf`` from ``camera``, composited over the background."""
         if self.device == "cuda":
-            return self._cuda_backend().march(self.lut(tf)[None], self.frame(camera))[0]
+            return self._cuda_backend().march([tf], self.frame(camera))[0]
         return self.to_rgb8_single(self.render_rgba(tf, camera))
 
     def sample_cache(self, camera: Camera | None = None) -> CacheViews:

@@ -9,7 +9,7 @@
 
 import { extentOf, frame } from "./gl_camera.js";
 import { VERTEX, attributeSource, renderSource } from "./gl_shaders.js";
-import { occupancy, tfKey, tfLut } from "./gl_tf.js";
+import { TABLE_SIZE, occupancy, preintegratedTable, tfKey, tfLut } from "./gl_tf.js";
 import { gradientCoding, gradientSlab, visibleBlocks } from "./gl_volume.js";
 
 /** Largest gradient texture (RGBA8, 4 bytes a voxel) the page builds; beyond it shading takes
@@ -101,6 +101,7 @@ export class GLVolumeRenderer {
     this.vao = gl.createVertexArray();
     this.volume = null;
     this.lutTex = gl.createTexture();
+    this.tableTex = gl.createTexture(); // the pre-integrated table (gl_tf.preintegratedTable)
     this.visTex = gl.createTexture();
     this.volTex = null;
     // Until a volume's gradient texture is built, shading differentiates the volume texture.
@@ -235,7 +236,14 @@ export class GLVolumeRenderer {
     else gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA16F, n, 1, 0, gl.RGBA, gl.FLOAT, lut);
     for (const k of [gl.TEXTURE_MIN_FILTER, gl.TEXTURE_MAG_FILTER]) gl.texParameteri(gl.TEXTURE_2D, k, gl.LINEAR);
     for (const k of [gl.TEXTURE_WRAP_S, gl.TEXTURE_WRAP_T]) gl.texParameteri(gl.TEXTURE_2D, k, gl.CLAMP_TO_EDGE);
-    const occ = occupancy(lut);
+    // The pre-integrated table, filtered bilinearly as the server's kernels interpolate it.
+    const table = preintegratedTable(tf, sampleDistance);
+    gl.bindTexture(gl.TEXTURE_2D, this.tableTex);
+    const tfmt = this.floatLinear ? gl.RGBA32F : gl.RGBA16F;
+    gl.texImage2D(gl.TEXTURE_2D, 0, tfmt, TABLE_SIZE, TABLE_SIZE, 0, gl.RGBA, gl.FLOAT, table);
+    for (const k of [gl.TEXTURE_MIN_FILTER, gl.TEXTURE_MAG_FILTER]) gl.texParameteri(gl.TEXTURE_2D, k, gl.LINEAR);
+    for (const k of [gl.TEXTURE_WRAP_S, gl.TEXTURE_WRAP_T]) gl.texParameteri(gl.TEXTURE_2D, k, gl.CLAMP_TO_EDGE);
+    const occ = occupancy(lut, true);
     this.vis = visibleBlocks(this.blocks, occ, this.vis);
     const nb = this.blocks.nb;
     gl.bindTexture(gl.TEXTURE_3D, this.visTex);
@@ -260,6 +268,9 @@ export class GLVolumeRenderer {
     gl.activeTexture(gl.TEXTURE2);
     gl.bindTexture(gl.TEXTURE_2D, this.lutTex);
     gl.uniform1i(u.u_lut, 2);
+    gl.activeTexture(gl.TEXTURE5);
+    gl.bindTexture(gl.TEXTURE_2D, this.tableTex);
+    if (u.u_table) gl.uniform1i(u.u_table, 5);
     if (u.u_grad && this.gradTex) {
       gl.activeTexture(gl.TEXTURE4);
       gl.bindTexture(gl.TEXTURE_3D, this.gradTex);

@@ -1,9 +1,14 @@
+import { TABLE_SIZE } from "./gl_tf.js";
+
 // GLSL ES 3.0 sources of the page's ray marcher: the server's kernels (render/kernels.py
 // `march` and `attribute`) written for the fragment shader, one ray per pixel.
 //
 // Same rays (ViewFrame packed), same box (voxel centres [0, n-1]), samples at t0 + k·dt from
-// box entry, trilinear value (the texture's linear filter), post-classification with linear
-// interpolation between LUT entries, front-to-back premultiplied compositing, early ray
+// box entry, trilinear value (the texture's linear filter), pre-integrated classification of
+// the segment from the previous sample (the table gl_tf.preintegratedTable builds as the
+// server does, interpolated by the texture's filter; the LUT with linear interpolation between
+// entries where the two values lie within one table entry), front-to-back premultiplied
+// compositing, early ray
 // termination at T < 1/255, empty-space skipping that keeps the sample grid (over blocks of 2–16
 // cells, a jump across a whole cube of empty ones where the grid allows: gl_volume.visibleBlocks),
 // and Blinn–Phong with a two-sided headlight from the gradient: the server's precomputed
@@ -12,9 +17,14 @@
 // the box, at six fetches a sample instead of one).
 
 /**
- * The head of both ray loops, inside main() once the ray (oi, di) and its box span t are
- * known: it opens the loops over the visible samples, p being the sample's position; the
- * body ends a ray with "done = true; break;" and closes the two loops and the if.
+ * The ray loop of both shaders, inside main() once the ray (oi, di) and its box span t are
+ * known: it calls the shader's `bool visit(int k, vec3 p, bool visible)` for each sample that
+ * can show (p its position; true ends the ray). With pre-integration a sample is classified by
+ * the segment from the one before it (kernels._classify), so skipping keeps every segment that
+ * can show, as kernels.march does: the first sample of a skipped stretch is still visited when
+ * the one before it lay in a visible block (`carry`: the segment out of a structure), and
+ * `visit` reads the value before a sample whose predecessor was skipped (`have` false: the
+ * segment into it).
  */
 const MARCH = `  if (t.y >= t.x) {
     int n = int((t.y - t.x) / u_dt) + 1;
@@ -31,11 +41,24 @@ const MARCH = `  if (t.y >= t.x) {
       int v = int(texelFetch(u_vis, b, 0).r * 255.0 + 0.5);
       int kn = skipCube(b, v & 127, oi, di, t.x, k);
       if (v >= 128) {
+        if (carry) {
+          done = visit(k, oi + (t.x + float(k) * u_dt) * di, false);
+          carry = false;
+          have = kn == k + 1;
+        } else {
+          have = false;
+        }
         k = kn;
         continue;
       }
       for (int kend = min(kn, n); k < kend; k++) {
-        vec3 p = oi + (t.x + float(k) * u_dt) * di;
+        if (visit(k, oi + (t.x + float(k) * u_dt) * di, true)) {
+          done = true;
+          break;
+        }
+      }
+    }
+  }
 `;
 
 export const VERTEX = `#version 300 es
@@ -54,6 +77,7 @@ precision highp sampler2D;
 uniform sampler3D u_vol;   // R8 (original bytes) or R16F (normalised values), linear filter
 uniform sampler3D u_vis;   // R8 per block (gl_volume.visibleBlocks's byte / 255), nearest
 uniform sampler2D u_lut;   // RGBA32F (L × 1), straight colour, linear filter
+uniform sampler2D u_table; // TABLE × TABLE pre-integrated, premultiplied (row: front value)
 uniform vec3 u_dims;       // nx, ny, nz
 uniform vec3 u_invDims;    // 1 / (nx, ny, nz)
 uniform ivec3 u_nb;        // blocks per axis
@@ -131,6 +155,27 @@ ivec3 blockOf(vec3 p) {
   ivec3 i = ivec3(max(p, vec3(0.0)));
   return min(i / BSIZE, u_nb - 1);
 }
+
+// The ray's state between samples (MARCH): its index-space direction, and with
+// pre-integration the value of the sample before (vf, when have) and whether that sample lay
+// in a visible block (carry).
+vec3 g_di;
+float vf = 0.0;
+bool have = false;
+bool carry = false;
+
+// Pre-integrated classification of the segment from value vfront to vback
+// (kernels._classify): the table's bilinear entry (premultiplied, by the texture's filter)
+// where the two lie a table entry apart or more, else the LUT at vback. Straight colour.
+vec4 classify(float vfront, float vback) {
+  float pf = vfront * float(TABLE - 1);
+  float pb = vback * float(TABLE - 1);
+  if (PREINT == 1 && abs(pb - pf) >= 1.0) {
+    vec4 e = textureLod(u_table, vec2((pb + 0.5) / float(TABLE), (pf + 0.5) / float(TABLE)), 0.0);
+    return e.a > 0.0 ? vec4(e.rgb / e.a, e.a) : vec4(0.0);
+  }
+  return lutLerp(vback * float(u_nl - 1));
+}
 `;
 
 /**
@@ -162,12 +207,14 @@ function specularPower(n) {
  * `shininess`: the specular exponent, built in (see specularPower). `blockSize`: the edge (cells)
  * of the empty-space-skipping grid (gl_volume.blockSize), built in.
  */
-export function renderSource({ shading, gradient, packed = false, shininess = null, blockSize = 8 }) {
+export function renderSource({ shading, gradient, packed = false, shininess = null, blockSize = 8, preintegrated = true }) {
   return `#version 300 es
 #define BSIZE ${blockSize}
 #define SHADING ${shading ? 1 : 0}
 #define GRADIENT_TEXTURE ${gradient ? 1 : 0}
 #define PACKED_VALUE ${packed ? 1 : 0}
+#define PREINT ${preintegrated ? 1 : 0}
+#define TABLE ${TABLE_SIZE}
 ${COMMON}
 uniform vec4 u_shade;      // ambient, diffuse, specular, shininess
 uniform sampler3D u_grad;  // RGBA8 gradient codes (128 = 0; alpha: the r8 value), linear filter
@@ -178,61 +225,79 @@ out vec4 outColor;
 
 ${specularPower(shininess)}
 
+vec3 g_l;
+vec3 g_h;
+vec3 acc = vec3(0.0);
+float tr = 1.0;
+
+// The value a sample reads: the packed gradient texture's byte, else the volume texture.
+float sampleValue(vec3 p) {
+#if PACKED_VALUE
+  return textureLod(u_grad, (p + 0.5) * u_invDims, 0.0).a * u_map.x + u_map.y;
+#else
+  return value(p);
+#endif
+}
+
+bool visit(int k, vec3 p, bool visible) {
+#if PACKED_VALUE
+  vec4 vg = textureLod(u_grad, (p + 0.5) * u_invDims, 0.0);
+  float v = vg.a * u_map.x + u_map.y;
+#else
+  float v = value(p);
+#endif
+#if PREINT
+  if (!have) vf = k > 0 ? sampleValue(p - u_dt * g_di) : v;
+  vec4 e = classify(vf, v);
+  vf = v;
+  have = true;
+  carry = visible;
+#else
+  vec4 e = lutLerp(v * float(u_nl - 1));
+#endif
+  float a = e.a;
+  if (a > 0.0) {
+    vec3 c = e.rgb;
+#if SHADING
+#if PACKED_VALUE
+    vec3 g = (vg.rgb - u_gcode.x) * u_gcode.y * u_is;
+#elif GRADIENT_TEXTURE
+    vec3 g = (textureLod(u_grad, (p + 0.5) * u_invDims, 0.0).rgb - u_gcode.x) * u_gcode.y * u_is;
+#else
+    vec3 g = 0.5 * vec3(
+      value(p + vec3(1.0, 0.0, 0.0)) - value(p - vec3(1.0, 0.0, 0.0)),
+      value(p + vec3(0.0, 1.0, 0.0)) - value(p - vec3(0.0, 1.0, 0.0)),
+      value(p + vec3(0.0, 0.0, 1.0)) - value(p - vec3(0.0, 0.0, 1.0))) * u_is;
+#endif
+    // |g| >= 1e-3 as the server's kernel, without branches (cheaper in software).
+    float m2 = dot(g, g);
+    float inv = inversesqrt(max(m2, 1e-12));
+    bool lit = m2 >= 1e-6;
+    float ndl = lit ? abs(dot(g, g_l)) * inv : 1.0;
+    float sp = lit ? specPow(min(abs(dot(g, g_h)) * inv, 1.0)) : 0.0;
+    c = min(vec3(1.0), c * (u_shade.x + u_shade.y * ndl) + u_shade.z * sp);
+#endif
+    acc += tr * a * c;
+    tr *= 1.0 - a;
+    if (tr < u_tstop) return true;
+  }
+  return false;
+}
+
 void main() {
   vec3 o, d;
   pixelRay(o, d);
   vec3 oi = o * u_is;
   vec3 di = d * u_is;
+  g_di = di;
   vec2 t = slab(oi.x, di.x, u_dims.x - 1.0, vec2(0.0, 1e30));
   t = slab(oi.y, di.y, u_dims.y - 1.0, t);
   t = slab(oi.z, di.z, u_dims.z - 1.0, t);
-  vec3 l = -u_fwd;
-  vec3 h = l - d;
+  g_l = -u_fwd;
+  vec3 h = g_l - d;
   float hn = length(h);
-  h = hn < 1e-12 ? l : h / hn;
-  vec3 acc = vec3(0.0);
-  float tr = 1.0;
-  float scale = float(u_nl - 1);
-${MARCH}#if PACKED_VALUE
-        vec4 vg = textureLod(u_grad, (p + 0.5) * u_invDims, 0.0);
-        vec4 e = lutLerp((vg.a * u_map.x + u_map.y) * scale);
-#else
-        vec4 e = lutLerp(value(p) * scale);
-#endif
-        float a = e.a;
-        if (a > 0.0) {
-          vec3 c = e.rgb;
-#if SHADING
-#if PACKED_VALUE
-          vec3 g = (vg.rgb - u_gcode.x) * u_gcode.y * u_is;
-#elif GRADIENT_TEXTURE
-          vec3 g = (textureLod(u_grad, (p + 0.5) * u_invDims, 0.0).rgb - u_gcode.x) * u_gcode.y * u_is;
-#else
-          vec3 g = 0.5 * vec3(
-            value(p + vec3(1.0, 0.0, 0.0)) - value(p - vec3(1.0, 0.0, 0.0)),
-            value(p + vec3(0.0, 1.0, 0.0)) - value(p - vec3(0.0, 1.0, 0.0)),
-            value(p + vec3(0.0, 0.0, 1.0)) - value(p - vec3(0.0, 0.0, 1.0))) * u_is;
-#endif
-          // |g| >= 1e-3 as the server's kernel, without branches (cheaper in software).
-          float m2 = dot(g, g);
-          float inv = inversesqrt(max(m2, 1e-12));
-          bool lit = m2 >= 1e-6;
-          float ndl = lit ? abs(dot(g, l)) * inv : 1.0;
-          float sp = lit ? specPow(min(abs(dot(g, h)) * inv, 1.0)) : 0.0;
-          c = min(vec3(1.0), c * (u_shade.x + u_shade.y * ndl) + u_shade.z * sp);
-#endif
-          float w = tr * a;
-          acc += w * c;
-          tr *= 1.0 - a;
-          if (tr < u_tstop) {
-            done = true;
-            break;
-          }
-        }
-      }
-    }
-  }
-  outColor = u_alphaOut == 1 ? vec4(acc, 1.0 - tr) : vec4(acc + tr * u_bg, 1.0);
+  g_h = hn < 1e-12 ? g_l : h / hn;
+${MARCH}  outColor = u_alphaOut == 1 ? vec4(acc, 1.0 - tr) : vec4(acc + tr * u_bg, 1.0);
 }`;
 }
 
@@ -243,47 +308,85 @@ ${MARCH}#if PACKED_VALUE
  * (no arrays indexed at run time, which software rasterisers keep in memory). `blockSize` as
  * renderSource's.
  */
-export function attributeSource(groups, blockSize = 8) {
+export function attributeSource(groups, blockSize = 8, preintegrated = true) {
   const g = [0, 1, 2, 3].slice(0, groups);
   return `#version 300 es
 #define BSIZE ${blockSize}
+#define PREINT ${preintegrated ? 1 : 0}
+#define TABLE ${TABLE_SIZE}
 ${COMMON}
 uniform vec4 u_mean[4];
 uniform vec4 u_width[4];   // unused slots: width 1, height 0
 uniform vec4 u_height[4];
 ${g.map((i) => `layout(location = ${i}) out vec4 out${i};`).join("\n")}
+${g.map((i) => `vec4 part${i} = vec4(0.0);`).join("\n")}
+float tr = 1.0;
+int qf = 0; // the previous sample's LUT entry (with pre-integration)
+
+// erf (Abramowitz and Stegun 7.1.26, within 1.5e-7), per component.
+vec4 erf4(vec4 x) {
+  vec4 s = sign(x);
+  vec4 a = abs(x);
+  vec4 t = 1.0 / (1.0 + 0.3275911 * a);
+  vec4 y = 1.0 - (((((1.061405429 * t - 1.453152027) * t) + 1.421413741) * t - 0.284496736) * t + 0.254829592) * t * exp(-a * a);
+  return s * y;
+}
+
+bool visit(int k, vec3 p, bool visible) {
+  float scale = float(u_nl - 1);
+  int q = clamp(int(value(p) * scale + 0.5), 0, u_nl - 1);
+  float a = lutAt(q).a;
+  int ti = 0;
+  int tj = 0;
+#if PREINT
+  if (!have) qf = k > 0 ? clamp(int(value(p - u_dt * g_di) * scale + 0.5), 0, u_nl - 1) : q;
+  if (qf != q) {
+    // kernels.pair_entry: the LUT entries on the table's grid.
+    float r = float(TABLE - 1) / scale;
+    ti = u_nl == TABLE ? qf : int(float(qf) * r + 0.5);
+    tj = u_nl == TABLE ? q : int(float(q) * r + 0.5);
+    if (ti != tj) a = texelFetch(u_table, ivec2(tj, ti), 0).a;
+  }
+  qf = q;
+  have = true;
+  carry = visible;
+#endif
+  if (a > 0.0) {
+    float total = 0.0;
+${g.map((i) => `    vec4 c${i};`).join("\n")}
+    if (ti != tj) {
+      // Each Gaussian's opacity density over the segment's values (kernels._mass).
+      float lo = float(min(ti, tj)) / float(TABLE - 1);
+      float hi = float(max(ti, tj)) / float(TABLE - 1);
+${g.map((i) => `      vec4 k${i} = 1.0 / (u_width[${i}] * 1.4142135623730951);
+      c${i} = u_height[${i}] * u_width[${i}] * (erf4((hi - u_mean[${i}]) * k${i}) - erf4((lo - u_mean[${i}]) * k${i}));`).join("\n")}
+      total = ${g.map((i) => `dot(c${i}, vec4(1.0))`).join(" + ")};
+    }
+    if (total <= 0.0) {
+      float s = float(q) / scale;
+${g.map((i) => `      vec4 z${i} = (vec4(s) - u_mean[${i}]) / u_width[${i}];
+      c${i} = u_height[${i}] * exp(-0.5 * z${i} * z${i});`).join("\n")}
+      total = ${g.map((i) => `dot(c${i}, vec4(1.0))`).join(" + ")};
+    }
+    if (total > 0.0) {
+      float w = tr * a / total;
+${g.map((i) => `      part${i} += w * c${i};`).join("\n")}
+    }
+    tr *= 1.0 - a;
+    if (tr < u_tstop) return true;
+  }
+  return false;
+}
 
 void main() {
   vec3 o, d;
   pixelRay(o, d);
   vec3 oi = o * u_is;
   vec3 di = d * u_is;
+  g_di = di;
   vec2 t = slab(oi.x, di.x, u_dims.x - 1.0, vec2(0.0, 1e30));
   t = slab(oi.y, di.y, u_dims.y - 1.0, t);
   t = slab(oi.z, di.z, u_dims.z - 1.0, t);
-${g.map((i) => `  vec4 part${i} = vec4(0.0);`).join("\n")}
-  float tr = 1.0;
-  float scale = float(u_nl - 1);
-${MARCH}        int q = clamp(int(value(p) * scale + 0.5), 0, u_nl - 1);
-        float a = lutAt(q).a;
-        if (a > 0.0) {
-          float s = float(q) / scale;
-${g.map((i) => `          vec4 z${i} = (vec4(s) - u_mean[${i}]) / u_width[${i}];
-          vec4 c${i} = u_height[${i}] * exp(-0.5 * z${i} * z${i});`).join("\n")}
-          float total = ${g.map((i) => `dot(c${i}, vec4(1.0))`).join(" + ")};
-          if (total > 0.0) {
-            float w = tr * a / total;
-${g.map((i) => `            part${i} += w * c${i};`).join("\n")}
-          }
-          tr *= 1.0 - a;
-          if (tr < u_tstop) {
-            done = true;
-            break;
-          }
-        }
-      }
-    }
-  }
-${g.map((i) => `  out${i} = part${i};`).join("\n")}
+${MARCH}${g.map((i) => `  out${i} = part${i};`).join("\n")}
 }`;
 }
