@@ -45,18 +45,26 @@ from intuitf.volume import load_volume, phantom  # noqa: E402
 DATA = Path(os.environ.get("INTUITF_DATA", ROOT / ".." / "shared" / "data" / "volumes"))
 
 
-def random_tfs(n: int, seed: int = 0) -> list[GaussianTF]:
+def random_tfs(
+    n: int,
+    seed: int = 0,
+    *,
+    gaussians: int = 5,
+    means: tuple[float, float] = (0.05, 1.0),
+    widths: tuple[float, float] = (0.01, 0.12),
+    heights: tuple[float, float] = (0.005, 0.6),
+) -> list[GaussianTF]:
     rng = np.random.default_rng(seed)
     return [
         GaussianTF(
             tuple(
                 Gaussian(
-                    mean=float(rng.uniform(0.05, 1.0)),
-                    width=float(rng.uniform(0.01, 0.12)),
-                    height=float(rng.uniform(0.005, 0.6)),
+                    mean=float(rng.uniform(*means)),
+                    width=float(rng.uniform(*widths)),
+                    height=float(rng.uniform(*heights)),
                     color=tuple(float(c) for c in rng.uniform(0, 1, 3)),
                 )
-                for _ in range(5)
+                for _ in range(gaussians)
             )
         )
         for _ in range(n)
@@ -118,21 +126,9 @@ def bench_volume(name, vol, tfs, sizes, use_vtk: bool, sample_distance: float = 
 def _thin_tfs(n: int, seed: int = 1) -> list[GaussianTF]:
     """Random TFs whose Gaussians are thinner than a surface's values change between samples
     (0.002-0.01 of the range), as sketch fits and narrow picks make."""
-    rng = np.random.default_rng(seed)
-    return [
-        GaussianTF(
-            tuple(
-                Gaussian(
-                    mean=float(rng.uniform(0.3, 0.95)),
-                    width=float(rng.uniform(0.002, 0.01)),
-                    height=float(rng.uniform(0.1, 0.8)),
-                    color=tuple(float(c) for c in rng.uniform(0, 1, 3)),
-                )
-                for _ in range(3)
-            )
-        )
-        for _ in range(n)
-    ]
+    return random_tfs(
+        n, seed, gaussians=3, means=(0.3, 0.95), widths=(0.002, 0.01), heights=(0.1, 0.8)
+    )
 
 
 #: The TF the tooth sketch's fit found (benchmarks/sketch_fit.py, seed 0): thin Gaussians on

@@ -164,6 +164,18 @@ float vf = 0.0;
 bool have = false;
 bool carry = false;
 
+// This pixel's ray in index space (oi, di; d its world direction) and its span in the box.
+vec2 indexRay(out vec3 oi, out vec3 di, out vec3 d) {
+  vec3 o;
+  pixelRay(o, d);
+  oi = o * u_is;
+  di = d * u_is;
+  g_di = di;
+  vec2 t = slab(oi.x, di.x, u_dims.x - 1.0, vec2(0.0, 1e30));
+  t = slab(oi.y, di.y, u_dims.y - 1.0, t);
+  return slab(oi.z, di.z, u_dims.z - 1.0, t);
+}
+
 // Pre-integrated classification of the segment from value vfront to vback
 // (kernels._classify): the table's bilinear entry (premultiplied, by the texture's filter)
 // where the two lie a table entry apart or more, else the LUT at vback. Straight colour.
@@ -285,14 +297,8 @@ bool visit(int k, vec3 p, bool visible) {
 }
 
 void main() {
-  vec3 o, d;
-  pixelRay(o, d);
-  vec3 oi = o * u_is;
-  vec3 di = d * u_is;
-  g_di = di;
-  vec2 t = slab(oi.x, di.x, u_dims.x - 1.0, vec2(0.0, 1e30));
-  t = slab(oi.y, di.y, u_dims.y - 1.0, t);
-  t = slab(oi.z, di.z, u_dims.z - 1.0, t);
+  vec3 oi, di, d;
+  vec2 t = indexRay(oi, di, d);
   g_l = -u_fwd;
   vec3 h = g_l - d;
   float hn = length(h);
@@ -379,14 +385,8 @@ ${g.map((i) => `      part${i} += w * c${i};`).join("\n")}
 }
 
 void main() {
-  vec3 o, d;
-  pixelRay(o, d);
-  vec3 oi = o * u_is;
-  vec3 di = d * u_is;
-  g_di = di;
-  vec2 t = slab(oi.x, di.x, u_dims.x - 1.0, vec2(0.0, 1e30));
-  t = slab(oi.y, di.y, u_dims.y - 1.0, t);
-  t = slab(oi.z, di.z, u_dims.z - 1.0, t);
+  vec3 oi, di, d;
+  vec2 t = indexRay(oi, di, d);
 ${MARCH}${g.map((i) => `  out${i} = part${i};`).join("\n")}
 }`;
 }

@@ -25,45 +25,14 @@ export function tfLut(tf, size, sampleDistance) {
   const out = new Float32Array(size * 4);
   const comps = new Float64Array(gs.length);
   for (let k = 0; k < size; k++) {
-    const s = size > 1 ? k / (size - 1) : 0;
-    let total = 0;
-    for (let i = 0; i < gs.length; i++) {
-      const z = (s - gs[i].mean) / gs[i].width;
-      comps[i] = gs[i].height * Math.exp(-0.5 * z * z);
-      total += comps[i];
-    }
-    let r = 0;
-    let g = 0;
-    let b = 0;
-    if (total > 1e-12) {
-      for (let i = 0; i < gs.length; i++) {
-        const c = gs[i].color;
-        r += comps[i] * c[0];
-        g += comps[i] * c[1];
-        b += comps[i] * c[2];
-      }
-      r /= total;
-      g /= total;
-      b /= total;
-    } else if (gs.length) {
-      let best = 0;
-      let bestD = Infinity;
-      for (let i = 0; i < gs.length; i++) {
-        const d = Math.abs(s - gs[i].mean) / gs[i].width;
-        if (d < bestD) {
-          bestD = d;
-          best = i;
-        }
-      }
-      [r, g, b] = gs[best].color;
-    }
-    let a = Math.min(1, Math.max(0, total));
+    const [total, r, g, b] = classifyAt(gs, size > 1 ? k / (size - 1) : 0, comps);
+    let a = total;
     if (sampleDistance !== 1) a = 1 - Math.pow(1 - a, sampleDistance);
     // Rounded to float32 first, as the server's table is float32 when it is thresholded.
     const a32 = Math.fround(a);
-    out[k * 4] = clamp01(r);
-    out[k * 4 + 1] = clamp01(g);
-    out[k * 4 + 2] = clamp01(b);
+    out[k * 4] = r;
+    out[k * 4 + 1] = g;
+    out[k * 4 + 2] = b;
     out[k * 4 + 3] = a32 < ALPHA_EPSILON ? 0 : a32;
   }
   return out;
@@ -97,7 +66,8 @@ export const TABLE_SIZE = 256;
 const SUBSTEPS = 8;
 const MAX_OPACITY = 1 - 1e-6;
 
-/** Opacity density and colour of `gs` at value s (GaussianTF.opacity, .color). */
+/** Opacity density (clamped to [0, 1]) and colour of `gs` at value s (GaussianTF.opacity,
+ * .color); `comps` is scratch space, one entry per Gaussian. */
 function classifyAt(gs, s, comps) {
   let total = 0;
   for (let i = 0; i < gs.length; i++) {
