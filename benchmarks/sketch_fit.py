@@ -2,10 +2,10 @@
 
 The tooth and its strokes are those of ``intent_cases.py --cases tooth-sketch`` (red across the
 crown top, yellow across the crown middle, blue across the root, drawn over the default TF's
-picture). For each seed it prints the strokes' errors (mean ΔE per stroke, as the offline judge
-measures them) for the strokes' hints as they are and for the fitted TF, each structure's ΔE2000
+picture). For each seed it prints the strokes' errors (ΔE per stroke over the structure it lies
+on, as the offline judge measures them in a run) for the strokes' hints as they are and for the fitted TF, each structure's ΔE2000
 on the labels (``intent_cases.measure``), and the fit's time (the view's sample cache built
-once, as a run builds it, then 200 renderings).
+once, as a run builds it, then 400 renderings).
 
     INTUITF_DATA=../shared/data/volumes python benchmarks/sketch_fit.py --seeds 4
 """
@@ -13,6 +13,7 @@ once, as a run builds it, then 200 renderings).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 import types
@@ -24,6 +25,7 @@ import intent_cases as ic  # noqa: E402
 from intuitf.evaluator.metric import MetricJudge  # noqa: E402
 from intuitf.evaluator.types import Intent  # noqa: E402
 from intuitf.intent.hints import read_intent  # noqa: E402
+from intuitf.intent.regions import sketch_regions  # noqa: E402
 from intuitf.intent.sketch_fit import fit_sketch  # noqa: E402
 from intuitf.render import VolumeRenderer  # noqa: E402
 
@@ -40,6 +42,11 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     strokes = read_intent(intent, scene.vol, camera=scene.camera).strokes
     t_hints = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    judged = dataclasses.replace(
+        intent, part_regions=sketch_regions(intent, scene.vol, scene.camera)
+    )
+    print(f"strokes grown over their structures in {time.perf_counter() - t0:.2f} s")
     print(f"strokes read in {t_hints:.2f} s: " + ", ".join(
         f"{h.center:.3f} (spread {h.spread:.3f}, height {h.height[0]}-{h.height[1]})"
         for h in strokes))  # fmt: skip
@@ -52,7 +59,7 @@ def main(argv=None) -> int:
         renderer = VolumeRenderer(scene.vol, size=args.size, shading=True, background=(0, 0, 0))
         view = renderer.sample_cache(scene.camera)
         fit = fit_sketch(
-            strokes, lambda tf, view=view: judge.stroke_errors(view.render(tf), intent), seed=seed
+            strokes, lambda tf, view=view: judge.stroke_errors(view.render(tf), judged), seed=seed
         )
         seconds = time.perf_counter() - t0
         assert fit is not None

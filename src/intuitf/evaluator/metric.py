@@ -63,7 +63,10 @@ aspect key                     measure (higher is better unless noted)
                                stroke's colour where the sketch's alpha > 0; a pixel where
                                the base showed a structure and the rendering shows none
                                counts as the worst ΔE (hiding a stroked structure is never a
-                               match)
+                               match). With the strokes' regions (``intent.part_regions``,
+                               each stroke grown over the structure it lies on), each
+                               stroke's error is instead the CIEDE2000 between its colour and
+                               its region's brightness-weighted, brightened mean colour
 ``unmarked_preservation``      minus the mean ΔE to the base rendering where alpha == 0
 ``edit_instruction_alignment`` in the region (``intent.selection_mask``: the pixels the
                                selected features cover in the base; else the sketch's alpha;
@@ -97,7 +100,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
-from skimage.color import rgb2lab
+from skimage.color import deltaE_ciede2000, rgb2lab
 from skimage.metrics import structural_similarity
 from skimage.transform import resize
 
@@ -518,12 +521,16 @@ class MetricJudge:
         return None if per is None else -float(per.mean())
 
     def stroke_errors(self, image: np.ndarray, intent: Intent) -> np.ndarray | None:
-        """Each stroke's mean ΔE in ``image`` (the strokes as
+        """Each stroke's ΔE in ``image`` (the strokes as
         :func:`intuitf.intent.strokes.strokes_of` groups them), as :meth:`score` measures
-        them for ``stroke_color_agreement``; None when ``intent`` has no strokes."""
+        them for ``stroke_color_agreement``: over its region where ``intent`` has the
+        strokes' regions (:func:`intuitf.intent.regions.sketch_regions`), else over its own
+        pixels; None when ``intent`` has no strokes."""
         return self._stroke_errors(self.features(image), intent)
 
     def _stroke_errors(self, f: _Features, intent: Intent) -> np.ndarray | None:
+        if intent.kind == "sketch" and intent.part_regions:
+            return self._stroke_region_errors(f, intent)
         mask, stroke_rgb = _strokes(intent, f.lab.shape[:2])
         if mask is None or not mask.any():
             return None
@@ -536,6 +543,34 @@ class MetricJudge:
         counts = np.bincount(which)
         per = np.bincount(which, weights=de[mask]) / np.maximum(counts, 1)
         return per[counts > 0]
+
+    def _stroke_region_errors(self, f: _Features, intent: Intent) -> np.ndarray:
+        """Each stroke's error over its region (the structure it lies on,
+        ``Intent.part_regions``): CIEDE2000 between the stroke's colour and the region's
+        colour, the mean of its pixels weighted by their brightness and brightened to the
+        stroke colour's value; the share of the region the base picture showed and this one
+        does not counts as :data:`_ABSENT_DELTA_E`.
+
+        A region, not the stroke's own pixels: a stroke is a line across a structure and asks
+        for the whole structure in its colour. Measured on the line alone, the tooth's crown
+        middle kept a grey band under its yellow stroke, where the root's blue Gaussian caught
+        the thin enamel's edge (``benchmarks/intent_cases.py --cases tooth-sketch``). One
+        colour for the region, each pixel weighted by its brightness: a dim pixel (turned
+        away from the light, or faint over the black background) says little about the
+        colour the structure has. CIEDE2000 rather than CIE76, which puts saturated blues
+        that a person sees as one colour far apart.
+        """
+        shape = f.lab.shape[:2]
+        shown = (
+            _resize_mask(self.features(intent.base).fg, shape)
+            if intent.base is not None
+            else np.ones(shape, bool)
+        )
+        return np.array(
+            [_region_delta_e(f, _resize_mask(r.mask, shape), shown, r.rgb)
+             for r in intent.part_regions],
+            dtype=np.float64,
+        )  # fmt: skip
 
     def _preserve(self, f: _Features, intent: Intent) -> float | None:
         if intent.base is None:
@@ -921,6 +956,24 @@ def _stroke_delta_e(f: _Features, mask: np.ndarray, asked: np.ndarray) -> np.nda
         level = np.maximum(asked.max(axis=1), 1e-3)
         seen[lit] = _brightened_lab(pix[lit], peak[lit], level[lit])
     return np.linalg.norm(seen - asked_lab, axis=1)
+
+
+def _region_delta_e(f: _Features, here: np.ndarray, shown: np.ndarray, rgb) -> float:
+    """A stroke's error over its region ``here`` (see
+    :meth:`MetricJudge._stroke_region_errors`); ``shown``: what the base picture showed."""
+    asked = np.clip(np.asarray(rgb, dtype=np.float32), 0.0, 1.0)
+    base = here & shown
+    gone = float((base & ~f.fg).sum() / max(int(base.sum()), 1))
+    if f.rgb is None or not (here & f.fg).any():
+        return _ABSENT_DELTA_E
+    pix = f.rgb[here & f.fg].astype(np.float32) / 255.0
+    weight = float(pix.max(axis=1).sum())  # each pixel by its brightness
+    if weight < 1e-3:
+        return _ABSENT_DELTA_E
+    mean = np.clip(pix.sum(axis=0) / weight * max(float(asked.max()), 1e-3), 0.0, 1.0)
+    seen, target = rgb2lab(np.stack([mean, asked])[None])[0]
+    de = float(deltaE_ciede2000(seen, target))
+    return (1.0 - gone) * de + gone * _ABSENT_DELTA_E
 
 
 def _stroke_ids(intent: Intent, shape: tuple[int, int]) -> np.ndarray:

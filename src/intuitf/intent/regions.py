@@ -14,6 +14,9 @@ the words ask for it solid (it hides the rest). Behind a translucent front part 
 mixes both, and there no structure gets the pixel (:func:`owned`). Nor does a structure get the
 pixels where a body with another named structure's values lies in front of it: a 1-D TF
 shows that body in the other's colour (the soil in the bonsai's pot, :func:`_unhidden`).
+
+A sketch's regions are its strokes, each grown over the structure it lies on
+(:func:`sketch_regions`): a stroke across the tooth's crown asks for the crown in its colour.
 """
 
 from __future__ import annotations
@@ -36,9 +39,11 @@ def part_regions(intent: Intent, volume, camera, size: tuple[int, int]) -> tuple
     at ``size`` (width, height); () unless the words name solid parts only, each matched to
     a structure.
 
-    Text and reference-picture intents only: a sketch's strokes are regions already, and an
-    edit's selection has its own mask.
+    A sketch's regions are its strokes grown over the structures they lie on
+    (:func:`sketch_regions`). An edit's selection has its own mask.
     """
+    if intent.kind == "sketch" and volume is not None:
+        return sketch_regions(intent, volume, camera)
     if intent.kind not in ("text", "image") or volume is None:
         return ()
     from intuitf.intent.hints import intent_hints, structure_map_of
@@ -86,6 +91,35 @@ def part_regions(intent: Intent, volume, camera, size: tuple[int, int]) -> tuple
             seen = lookalikes & np.any(other, axis=0)
             out[k] = _unhidden(out[k], voxel_sets[k], seen, volume.spacing, camera)
     return tuple(r for r in out if r.mask.mean() >= MIN_SHARE)
+
+
+def sketch_regions(intent: Intent, volume, camera) -> tuple[PartRegion, ...]:
+    """A sketch's strokes grown over the structures they lie on
+    (:func:`intuitf.intent.strokes.stroke_regions`), one region per stroke in its colour, in
+    the order of ``strokes_of(intent.sketch, min_pixels=1)``; () with fewer than two strokes
+    on the object, or a stroke left without a region (then each stroke is judged on its own
+    pixels). ``camera`` is the one the sketch's base picture was rendered from."""
+    if intent.sketch is None or not camera:
+        return ()
+    from intuitf.intent.colours import colour_word
+    from intuitf.intent.strokes import stroke_regions, strokes_of
+    from intuitf.render.camera import Camera
+    from intuitf.tf.defaults import background_cutoff
+
+    cam = camera if isinstance(camera, Camera) else Camera.from_dict(dict(camera))
+    counts, _ = volume.histogram()
+    cut = background_cutoff(np.asarray(counts, dtype=np.float64))
+    ids = stroke_regions(intent.sketch, volume.data, tuple(volume.spacing), cam, cut)
+    if ids is None:
+        return ()
+    out = []
+    for k, (rgb, _) in enumerate(strokes_of(intent.sketch, min_pixels=1), start=1):
+        mask = ids == k
+        if not mask.any():
+            return ()
+        colour = (rgb[0] / 255.0, rgb[1] / 255.0, rgb[2] / 255.0)
+        out.append(PartRegion(f"{colour_word(colour)} stroke", colour, mask))
+    return tuple(out)
 
 
 #: Voxels within this many of a structure are its partial-volume rim, not something in

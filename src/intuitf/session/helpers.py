@@ -57,7 +57,10 @@ def _fit_sketch(intent: Intent, settings: RunSettings, volume: Volume, reading: 
         or not settings.camera
     ):
         return None
+    from dataclasses import replace
+
     from intuitf.evaluator.metric import MetricJudge
+    from intuitf.intent.regions import sketch_regions
     from intuitf.intent.sketch_fit import fit_sketch
     from intuitf.render import Camera, VolumeRenderer
 
@@ -68,10 +71,13 @@ def _fit_sketch(intent: Intent, settings: RunSettings, volume: Volume, reading: 
         background=tuple(settings.background),
         device=settings.device,
     )
-    view = renderer.sample_cache(Camera.from_dict(settings.camera))
+    camera = Camera.from_dict(settings.camera)
+    view = renderer.sample_cache(camera)
     judge = MetricJudge(cache_size=4)
+    # Measured as the run's judge measures the strokes: over the structures they lie on.
+    judged = replace(intent, part_regions=sketch_regions(intent, volume, camera))
     fit = fit_sketch(
-        reading.strokes, lambda tf: judge.stroke_errors(view.render(tf), intent),
+        reading.strokes, lambda tf: judge.stroke_errors(view.render(tf), judged),
         seed=settings.seed,
     )  # fmt: skip
     return fit if fit is not None and fit.improved else None
