@@ -42,14 +42,14 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     strokes = read_intent(intent, scene.vol, camera=scene.camera).strokes
     t_hints = time.perf_counter() - t0
+    print(f"strokes read in {t_hints:.2f} s: " + ", ".join(
+        f"{h.center:.3f} (spread {h.spread:.3f}, height {h.height[0]}-{h.height[1]})"
+        for h in strokes))  # fmt: skip
     t0 = time.perf_counter()
     judged = dataclasses.replace(
         intent, part_regions=sketch_regions(intent, scene.vol, scene.camera)
     )
     print(f"strokes grown over their structures in {time.perf_counter() - t0:.2f} s")
-    print(f"strokes read in {t_hints:.2f} s: " + ", ".join(
-        f"{h.center:.3f} (spread {h.spread:.3f}, height {h.height[0]}-{h.height[1]})"
-        for h in strokes))  # fmt: skip
     judge = MetricJudge(cache_size=4)
     print(
         f"{'seed':>4} {'fit s':>6}  {'stroke ΔE hints -> fit':<34} ΔE2000 crown top / middle / root"
