@@ -40,7 +40,9 @@ def part_regions(intent: Intent, volume, camera, size: tuple[int, int]) -> tuple
     a structure.
 
     A sketch's regions are its strokes grown over the structures they lie on
-    (:func:`sketch_regions`). An edit's selection has its own mask.
+    (:func:`sketch_regions`), on the sketch's own grid (at most
+    :data:`~intuitf.intent.strokes.REGION_SIZE` a side; a judge resizes a region to its
+    picture). An edit's selection has its own mask.
     """
     if intent.kind == "sketch" and volume is not None:
         return sketch_regions(intent, volume, camera)
