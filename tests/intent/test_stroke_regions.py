@@ -130,5 +130,6 @@ def test_the_session_judges_a_sketch_over_its_strokes_regions():
         judged = sess._judged_intent()
         assert len(judged.part_regions) == 2
         drawn = sketch[..., 3] > 0
-        assert all(r.mask.sum() > 2 * drawn.sum() / 2 for r in judged.part_regions)
+        # Grown over the blocks: each region is larger than both strokes' lines together.
+        assert all(r.mask.sum() > drawn.sum() for r in judged.part_regions)
         sess.step()
