@@ -537,8 +537,7 @@ class MetricJudge:
         de = np.zeros(f.lab.shape[:2], np.float32)
         de[mask] = _stroke_delta_e(f, mask, stroke_rgb[mask])
         if intent.base is not None:
-            shown = _resize_mask(self.features(intent.base).fg, f.lab.shape[:2])
-            de = np.where(shown & ~f.fg, _ABSENT_DELTA_E, de)
+            de = np.where(self._base_shown(intent, f.lab.shape[:2]) & ~f.fg, _ABSENT_DELTA_E, de)
         which = _stroke_ids(intent, f.lab.shape[:2])[mask]
         counts = np.bincount(which)
         per = np.bincount(which, weights=de[mask]) / np.maximum(counts, 1)
@@ -561,11 +560,7 @@ class MetricJudge:
         that a person sees as one colour far apart.
         """
         shape = f.lab.shape[:2]
-        shown = (
-            _resize_mask(self.features(intent.base).fg, shape)
-            if intent.base is not None
-            else np.ones(shape, bool)
-        )
+        shown = self._base_shown(intent, shape) if intent.base is not None else np.ones(shape, bool)
         return np.array(
             [_region_delta_e(f, _resize_mask(r.mask, shape), shown, r.rgb)
              for r in intent.part_regions],
@@ -632,6 +627,10 @@ class MetricJudge:
         if mask is None or base is None:
             return None
         return float(np.linalg.norm(f.lab[mask] - base[mask], axis=1).mean()) / 100.0
+
+    def _base_shown(self, intent: Intent, shape: tuple[int, int]) -> np.ndarray:
+        """Where the base picture shows something, on a picture of ``shape``."""
+        return _resize_mask(self.features(intent.base).fg, shape)  # type: ignore[arg-type]
 
     def _base_lab(self, intent: Intent, shape: tuple[int, int]) -> np.ndarray:
         base = self.features(intent.base).lab  # type: ignore[arg-type]
@@ -964,9 +963,10 @@ def _region_delta_e(f: _Features, here: np.ndarray, shown: np.ndarray, rgb) -> f
     asked = np.clip(np.asarray(rgb, dtype=np.float32), 0.0, 1.0)
     base = here & shown
     gone = float((base & ~f.fg).sum() / max(int(base.sum()), 1))
-    if f.rgb is None or not (here & f.fg).any():
+    seen_here = here & f.fg
+    if f.rgb is None or not seen_here.any():
         return _ABSENT_DELTA_E
-    pix = f.rgb[here & f.fg].astype(np.float32) / 255.0
+    pix = f.rgb[seen_here].astype(np.float32) / 255.0
     weight = float(pix.max(axis=1).sum())  # each pixel by its brightness
     if weight < 1e-3:
         return _ABSENT_DELTA_E

@@ -834,13 +834,20 @@ def explorer_hints(
 
 def _stroke_hints(intent: Intent, volume, camera) -> list:
     from intuitf.intent.strokes import stroke_hints
+
+    cam, cut = stroke_rays(volume, camera)
+    return stroke_hints(intent.sketch, volume.data, tuple(volume.spacing), cam, cut)
+
+
+def stroke_rays(volume, camera):
+    """What a stroke's rays need besides the volume's array: the ``Camera`` (from a
+    ``Camera`` or its dict) and the background's upper value, where a ray enters the object."""
     from intuitf.render.camera import Camera
     from intuitf.tf.defaults import background_cutoff
 
     cam = camera if isinstance(camera, Camera) else Camera.from_dict(dict(camera))
     counts, _ = volume.histogram()
-    cut = background_cutoff(np.asarray(counts, dtype=np.float64))
-    return stroke_hints(intent.sketch, volume.data, tuple(volume.spacing), cam, cut)
+    return cam, background_cutoff(np.asarray(counts, dtype=np.float64))
 
 
 def _with_place(h) -> MaterialHint:

@@ -104,13 +104,10 @@ def sketch_regions(intent: Intent, volume, camera) -> tuple[PartRegion, ...]:
     if intent.sketch is None or not camera:
         return ()
     from intuitf.intent.colours import colour_word
+    from intuitf.intent.hints import stroke_rays
     from intuitf.intent.strokes import stroke_regions, strokes_of
-    from intuitf.render.camera import Camera
-    from intuitf.tf.defaults import background_cutoff
 
-    cam = camera if isinstance(camera, Camera) else Camera.from_dict(dict(camera))
-    counts, _ = volume.histogram()
-    cut = background_cutoff(np.asarray(counts, dtype=np.float64))
+    cam, cut = stroke_rays(volume, camera)
     ids = stroke_regions(intent.sketch, volume.data, tuple(volume.spacing), cam, cut)
     if ids is None:
         return ()

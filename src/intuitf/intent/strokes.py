@@ -381,10 +381,11 @@ def stroke_regions(
         if own.size == 0:
             continue
         mine = out == k
+        grown_feats = feats[mine]
         # Nearest pixel under the stroke, in the two values (max of the two differences).
-        near = np.full(mine.sum(), np.inf)
+        near = np.full(len(grown_feats), np.inf)
         for chunk in np.array_split(own, max(1, len(own) // 256)):
-            d = np.abs(feats[mine][:, None, :] - chunk[None]).max(axis=2).min(axis=1)
+            d = np.abs(grown_feats[:, None, :] - chunk[None]).max(axis=2).min(axis=1)
             near = np.minimum(near, d)
         flat = out.reshape(-1)  # a view: out is contiguous
         flat[np.flatnonzero(mine.ravel())[near > REGION_REACH]] = 0
