@@ -5,7 +5,7 @@ crown top, yellow across the crown middle, blue across the root, drawn over the 
 picture). For each seed it prints the strokes' errors (ΔE per stroke over the structure it lies
 on, as the offline judge measures them in a run) for the strokes' hints as they are and for the fitted TF, each structure's ΔE2000
 on the labels (``intent_cases.measure``), and the fit's time (the view's sample cache built
-once, as a run builds it, then 400 renderings).
+once, as a run builds it, then 800 renderings).
 
     INTUITF_DATA=../shared/data/volumes python benchmarks/sketch_fit.py --seeds 4
 """

@@ -50,6 +50,30 @@ def test_nothing_to_fit_gives_no_fit():
     assert fit_sketch([hint], lambda tf: None) is None
 
 
+def test_a_search_that_stalls_starts_again_and_spends_its_whole_budget():
+    # A cost that no step changes stalls CMA-ES at once (flat fitness): the fit then starts
+    # again from its best point until its iterations are spent, instead of stopping there.
+    hint = StrokeHint(RED, 10, 0.4, 0.02, 1.0)
+    fit = fit_sketch([hint], lambda tf: np.array([5.0]), iterations=12, popsize=4)
+    assert fit is not None
+    assert fit.evaluations == 1 + 12 * 4
+
+
+def test_the_stroke_errors_of_a_fresh_picture_are_those_of_a_judged_one():
+    # Measured on the pixels alone (a fit's pictures) or on the judge's cached features (a
+    # run's candidates), a picture's stroke errors are the same.
+    vol = two_blocks()
+    intent = _sketch_intent(vol)
+    picture = VolumeRenderer(vol, size=64).render(BLOCKS_TF, CAM)
+    judged = MetricJudge()
+    judged.features(picture)
+    cached = judged.stroke_errors(picture, intent)
+    fresh = MetricJudge().stroke_errors(picture, intent)
+    assert cached is not None and fresh is not None
+    np.testing.assert_allclose(cached, fresh)
+    assert cached.max() > 0.0
+
+
 SMALL = dict(population=6, generations=2, image_size=48, output_size=48, top_k=1)
 
 

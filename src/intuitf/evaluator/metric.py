@@ -141,12 +141,20 @@ _SEMI_TARGET = 35.0
 
 
 @dataclass
-class _Features:
-    """What the judge needs to know about one image."""
+class _Pixels:
+    """A picture as the stroke measures read it: its pixels, their CIELAB colours, and which
+    of them differ from the background (the colour along the picture's border)."""
 
+    rgb: np.ndarray  # (H, W, 3) uint8
     lab: np.ndarray  # (H, W, 3) float32
     fg: np.ndarray  # (H, W) bool
     bg_lab: np.ndarray  # (3,)
+
+
+@dataclass
+class _Features(_Pixels):
+    """What the judge needs to know about one image."""
+
     coverage: float
     entropy: float
     variety: float
@@ -156,7 +164,6 @@ class _Features:
     mean_lab: np.ndarray
     gray128: np.ndarray  # luminance in [0, 1], 128 x 128
     quality: Quality  # clarity, separation, richness, discrimination (metric_quality)
-    rgb: np.ndarray | None = None  # the picture (uint8), for measures made on demand
     _layers: tuple | None = None  # (outline Lab, inside Lab) or (), once asked for
     _raw_layers: tuple | None = None  # (outline RGB, inside RGB) as shown, or ()
 
@@ -181,7 +188,7 @@ class _Features:
         """RGB (0..1) of the object's outline band and of its inside as the picture shows
         them, () when it has no both; worked out once."""
         if self._raw_layers is None:
-            found = outline_and_inside(self.rgb) if self.rgb is not None else None
+            found = outline_and_inside(self.rgb)
             self._raw_layers = () if found is None else tuple(found)
         return self._raw_layers
 
@@ -216,13 +223,24 @@ def _to_rgb_u8(image: np.ndarray) -> np.ndarray:
     return img
 
 
-def _features(image: np.ndarray) -> _Features:
+def _pixels(image: np.ndarray) -> _Pixels:
     rgb = _to_rgb_u8(image)
     lab = rgb2lab(rgb.astype(np.float32) / 255.0).astype(np.float32)
     border = np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]])
     bg_lab = np.median(border, axis=0)
+    fg = np.linalg.norm(lab - bg_lab, axis=2) > _FG_DELTA_E
+    return _Pixels(rgb, lab, fg, bg_lab)
+
+
+#: A pixel this far (CIE76) from the background's colour is foreground: below a
+#: just-noticeable difference counts as background.
+_FG_DELTA_E = 3.0
+
+
+def _features(image: np.ndarray) -> _Features:
+    px = _pixels(image)
+    rgb, lab, fg, bg_lab = px.rgb, px.lab, px.fg, px.bg_lab
     dist = np.linalg.norm(lab - bg_lab, axis=2)
-    fg = dist > 3.0  # below a just-noticeable difference counts as background
     coverage = float(fg.mean())
     fg_lab = lab[fg]
     if fg_lab.shape[0] < max(16, int(0.005 * fg.size)):
@@ -246,8 +264,8 @@ def _features(image: np.ndarray) -> _Features:
         mean_lab = bg_lab.copy()
     gray128 = resize(lab[..., 0] / 100.0, (128, 128), anti_aliasing=True).astype(np.float64)
     return _Features(
-        lab, fg, bg_lab, coverage, float(entropy), float(variety), contrast, opacity,
-        lab_hist, mean_lab, gray128, quality(rgb), rgb,
+        rgb, lab, fg, bg_lab, coverage, float(entropy), float(variety), contrast, opacity,
+        lab_hist, mean_lab, gray128, quality(rgb),
     )  # fmt: skip
 
 
@@ -525,10 +543,15 @@ class MetricJudge:
         :func:`intuitf.intent.strokes.strokes_of` groups them), as :meth:`score` measures
         them for ``stroke_color_agreement``: over its region where ``intent`` has the
         strokes' regions (:func:`intuitf.intent.regions.sketch_regions`), else over its own
-        pixels; None when ``intent`` has no strokes."""
-        return self._stroke_errors(self.features(image), intent)
+        pixels; None when ``intent`` has no strokes.
 
-    def _stroke_errors(self, f: _Features, intent: Intent) -> np.ndarray | None:
+        Reads only the picture's pixels (the features of a picture already judged where
+        cached): a fit measures hundreds of pictures it never judges, and the judge's other
+        features took three quarters of each measure's time."""
+        hit = self._cache.get(_digest(image))
+        return self._stroke_errors(hit if hit is not None else _pixels(image), intent)
+
+    def _stroke_errors(self, f: _Pixels, intent: Intent) -> np.ndarray | None:
         if intent.kind == "sketch" and intent.part_regions:
             return self._stroke_region_errors(f, intent)
         mask, stroke_rgb = _strokes(intent, f.lab.shape[:2])
@@ -543,7 +566,7 @@ class MetricJudge:
         per = np.bincount(which, weights=de[mask]) / np.maximum(counts, 1)
         return per[counts > 0]
 
-    def _stroke_region_errors(self, f: _Features, intent: Intent) -> np.ndarray:
+    def _stroke_region_errors(self, f: _Pixels, intent: Intent) -> np.ndarray:
         """Each stroke's error over its region (the structure it lies on,
         ``Intent.part_regions``): CIEDE2000 between the stroke's colour and the region's
         colour, the mean of its pixels weighted by their brightness and brightened to the
@@ -714,8 +737,6 @@ def _shaded_presence(f: _Features, name: str) -> float:
     share is then discounted by how far the brightest of the matching pixels (90th
     percentile) stay from the colour's lightness, so a grey surface does not pass for white.
     """
-    if f.rgb is None:
-        return 0.0
     rgb = f.rgb[f.fg].astype(np.float32) / 255.0
     asked = np.asarray(NAMED_COLOURS[name], np.float32) / 255.0
     peak = rgb.max(axis=1)
@@ -769,7 +790,7 @@ def _region_colour(f: _Features, region) -> float:
     lit it is (as :meth:`_Features.layers`).
     """
     here = _resize_mask(region.mask, f.fg.shape) & f.fg
-    if f.rgb is None or int(here.sum()) < _REGION_MIN_PIXELS:
+    if int(here.sum()) < _REGION_MIN_PIXELS:
         return 0.0
     rgb = f.rgb[here].astype(np.float32) / 255.0
     peak = rgb.max(axis=1)
@@ -935,7 +956,7 @@ def _strokes(intent: Intent, shape: tuple[int, int]) -> tuple[np.ndarray | None,
     return alpha, rgb
 
 
-def _stroke_delta_e(f: _Features, mask: np.ndarray, asked: np.ndarray) -> np.ndarray:
+def _stroke_delta_e(f: _Pixels, mask: np.ndarray, asked: np.ndarray) -> np.ndarray:
     """CIE76 ΔE between each stroke pixel (``mask``) of the picture and its stroke's colour
     (``asked``, N x 3 RGB in [0, 1]), the pixel brightened first to that colour's value (max
     channel).
@@ -948,23 +969,22 @@ def _stroke_delta_e(f: _Features, mask: np.ndarray, asked: np.ndarray) -> np.nda
     """
     asked_lab = rgb2lab(asked[None])[0]
     seen = f.lab[mask]  # boolean indexing copies: the cached features stay as they are
-    if f.rgb is not None:
-        pix = f.rgb[mask].astype(np.float32) / 255.0
-        peak = pix.max(axis=1)
-        lit = peak >= 0.05
-        level = np.maximum(asked.max(axis=1), 1e-3)
-        seen[lit] = _brightened_lab(pix[lit], peak[lit], level[lit])
+    pix = f.rgb[mask].astype(np.float32) / 255.0
+    peak = pix.max(axis=1)
+    lit = peak >= 0.05
+    level = np.maximum(asked.max(axis=1), 1e-3)
+    seen[lit] = _brightened_lab(pix[lit], peak[lit], level[lit])
     return np.linalg.norm(seen - asked_lab, axis=1)
 
 
-def _region_delta_e(f: _Features, here: np.ndarray, shown: np.ndarray, rgb) -> float:
+def _region_delta_e(f: _Pixels, here: np.ndarray, shown: np.ndarray, rgb) -> float:
     """A stroke's error over its region ``here`` (see
     :meth:`MetricJudge._stroke_region_errors`); ``shown``: what the base picture showed."""
     asked = np.clip(np.asarray(rgb, dtype=np.float32), 0.0, 1.0)
     base = here & shown
     gone = float((base & ~f.fg).sum() / max(int(base.sum()), 1))
     seen_here = here & f.fg
-    if f.rgb is None or not seen_here.any():
+    if not seen_here.any():
         return _ABSENT_DELTA_E
     pix = f.rgb[seen_here].astype(np.float32) / 255.0
     weight = float(pix.max(axis=1).sum())  # each pixel by its brightness
