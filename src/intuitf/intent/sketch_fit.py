@@ -153,9 +153,7 @@ def fit_sketch(
             for x in xs:
                 err = errors(_decode(np.asarray(x), strokes))
                 evaluations += 1
-                cost = (
-                    _UNMEASURED if err is None or len(err) == 0 else _objective(np.asarray(err))
-                )
+                cost = _UNMEASURED if err is None or len(err) == 0 else _objective(np.asarray(err))
                 costs.append(cost)
                 if cost < best_cost:
                     best_x, best_err, best_cost = np.asarray(x), np.asarray(err), cost
