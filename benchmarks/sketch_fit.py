@@ -2,10 +2,12 @@
 
 The tooth and its strokes are those of ``intent_cases.py --cases tooth-sketch`` (red across the
 crown top, yellow across the crown middle, blue across the root, drawn over the default TF's
-picture). For each seed it prints the strokes' errors (ΔE per stroke over the structure it lies
-on, as the offline judge measures them in a run) for the strokes' hints as they are and for the fitted TF, each structure's ΔE2000
-on the labels (``intent_cases.measure``), and the fit's time (the view's sample cache built
-once, as a run builds it, then 800 renderings).
+picture). For each seed it fits the strokes as a run does (``intuitf.session.helpers``:
+the strokes grown over their structures, the views' sample caches built, then 800 renderings
+lit and 800 unshaded) and prints the strokes' errors (per stroke, the mean of the offline
+judge's ΔE over the structure it lies on in the lit picture and of the structure's colour in
+the unshaded one) for the strokes' hints as they are and for the fitted TF, each structure's
+ΔE2000 on the labels (``intent_cases.measure``), and the fit's time, all of it.
 
     INTUITF_DATA=../shared/data/volumes python benchmarks/sketch_fit.py --seeds 4
 """
@@ -13,7 +15,6 @@ once, as a run builds it, then 800 renderings).
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 import time
 import types
@@ -22,12 +23,10 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import intent_cases as ic  # noqa: E402
-from intuitf.evaluator.metric import MetricJudge  # noqa: E402
 from intuitf.evaluator.types import Intent  # noqa: E402
 from intuitf.intent.hints import read_intent  # noqa: E402
-from intuitf.intent.regions import sketch_regions  # noqa: E402
-from intuitf.intent.sketch_fit import fit_sketch  # noqa: E402
-from intuitf.render import VolumeRenderer  # noqa: E402
+from intuitf.session.helpers import _fit_sketch as fit_for_run  # noqa: E402
+from intuitf.session.settings import RunSettings  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -40,27 +39,21 @@ def main(argv=None) -> int:
     base, sketch = ic._sketch(scene, asked)
     intent = Intent(kind="sketch", sketch=sketch, base=base)
     t0 = time.perf_counter()
-    strokes = read_intent(intent, scene.vol, camera=scene.camera).strokes
+    reading = read_intent(intent, scene.vol, camera=scene.camera)
+    strokes = reading.strokes
     t_hints = time.perf_counter() - t0
     print(f"strokes read in {t_hints:.2f} s: " + ", ".join(
         f"{h.center:.3f} (spread {h.spread:.3f}, height {h.height[0]}-{h.height[1]})"
         for h in strokes))  # fmt: skip
-    t0 = time.perf_counter()
-    judged = dataclasses.replace(
-        intent, part_regions=sketch_regions(intent, scene.vol, scene.camera)
-    )
-    print(f"strokes grown over their structures in {time.perf_counter() - t0:.2f} s")
-    judge = MetricJudge(cache_size=4)
     print(
-        f"{'seed':>4} {'fit s':>6}  {'stroke ΔE hints -> fit':<34} ΔE2000 crown top / middle / root"
+        f"{'seed':>4} {'fit s':>6}  {'stroke error hints -> fit':<34}"
+        " ΔE2000 crown top / middle / root"
     )
     for seed in range(args.seeds):
+        settings = RunSettings(image_size=args.size, output_size=args.size, seed=seed,
+                               shading=True, camera=scene.camera.to_dict())  # fmt: skip
         t0 = time.perf_counter()
-        renderer = VolumeRenderer(scene.vol, size=args.size, shading=True, background=(0, 0, 0))
-        view = renderer.sample_cache(scene.camera)
-        fit = fit_sketch(
-            strokes, lambda tf, view=view: judge.stroke_errors(view.render(tf), judged), seed=seed
-        )
+        fit = fit_for_run(intent, settings, scene.vol, reading)
         seconds = time.perf_counter() - t0
         assert fit is not None
         m = ic.measure(scene, fit.tf, asked)["structures"]

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from helpers.strokes import BLOCKS_TF, sketch_over, two_blocks
 from intuitf.evaluator.metric import MetricJudge
-from intuitf.evaluator.types import Intent
-from intuitf.intent.sketch_fit import fit_sketch
+from intuitf.evaluator.types import Intent, PartRegion
+from intuitf.intent.sketch_fit import fit_sketch, material_errors, regions_on
 from intuitf.intent.strokes import StrokeHint
 from intuitf.render import Camera, VolumeRenderer
 from intuitf.session import RunDirectory, Session
@@ -72,6 +73,36 @@ def test_the_stroke_errors_of_a_fresh_picture_are_those_of_a_judged_one():
     assert cached is not None and fresh is not None
     np.testing.assert_allclose(cached, fresh)
     assert cached.max() > 0.0
+
+
+def test_a_regions_material_colour_is_its_rays_colour_however_faint():
+    # Premultiplied RGBA: the left half yellow, faint at the top and opaque below; the right
+    # half red over the region's bottom rows, yellow above.
+    yellow, red = np.array([0.94, 0.86, 0.16]), np.array([0.86, 0.12, 0.12])
+    rgba = np.zeros((8, 8, 4), np.float32)
+    alpha = np.where(np.arange(8)[:, None] < 4, 0.05, 0.9)[:, :4]
+    rgba[:, :4, :3] = yellow * alpha[..., None]
+    rgba[:, :4, 3] = alpha
+    rgba[:4, 4:, :3], rgba[:4, 4:, 3] = yellow * 0.5, 0.5
+    rgba[4:, 4:, :3], rgba[4:, 4:, 3] = red * 0.5, 0.5
+    left, right, empty = (np.zeros((8, 8), bool) for _ in range(3))
+    left[:, :4], right[:, 4:] = True, True
+    regions = [PartRegion("left", tuple(yellow), left), PartRegion("right", tuple(yellow), right),
+               PartRegion("empty", tuple(yellow), empty)]  # fmt: skip
+    errors = material_errors(rgba, regions)
+    assert errors[0] < 0.5  # its faint and its opaque rays alike: yellow
+    assert errors[1] > 15.0  # half of it red
+    assert errors[2] == 100.0  # nothing there takes a colour
+
+
+def test_regions_are_resized_to_the_picture_they_are_measured_on():
+    mask = np.zeros((16, 16), bool)
+    mask[:8] = True
+    region = PartRegion("top", (1.0, 0.0, 0.0), mask)
+    with pytest.raises(ValueError, match="regions_on"):
+        material_errors(np.zeros((8, 8, 4), np.float32), [region])
+    (small,) = regions_on([region], (8, 8))
+    assert small.mask.shape == (8, 8) and small.mask[:4].all() and not small.mask[4:].any()
 
 
 SMALL = dict(population=6, generations=2, image_size=48, output_size=48, top_k=1)

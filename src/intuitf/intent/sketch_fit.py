@@ -10,27 +10,32 @@ stays the stroke's) to lower the strokes' colour error in the rendered picture.
 
 The objective is the worst stroke's error plus 0.3 of their mean: the mean alone let one
 stroke be given up for the others (on the tooth, the red crown top went yellow while the
-yellow and blue strokes improved). Errors are measured by a caller-given function (a
-rendering and the offline judge's per-stroke ΔE,
-:meth:`intuitf.evaluator.metric.MetricJudge.stroke_errors`, a run's over each stroke's
-structure: :func:`intuitf.intent.regions.sketch_regions`): this module renders nothing.
+yellow and blue strokes improved). Errors are measured by a caller-given function: a run's
+(``intuitf.session.helpers``) is, per stroke, the mean of two measures over the structure
+the stroke lies on (:func:`intuitf.intent.regions.sketch_regions`): the offline judge's ΔE
+in the lit picture (:meth:`intuitf.evaluator.metric.MetricJudge.stroke_errors`: what the
+person sees, and whether the structure shows at all) and the colour the TF gives the
+structure's rays, unshaded (:func:`material_errors`: its material's colour, without the
+headlight's highlights). This module renders nothing.
 
-On the paper's tooth sketch (``benchmarks/intent_cases.py --cases tooth-sketch``, metric judge,
-12 seeds) the fitted TF brought the first generation's crown top / middle / root from ΔE2000
-23.1 / 11.3 / 7.9 to 8.2 / 12.4 / 1.9, and the run's last from 16.2 / 14.8 / 3.5 to
-7.9 / 12.2 / 0.9, in 200 renderings of a cached 128-pixel view (4-8 s on two CPU cores;
-``benchmarks/sketch_fit.py``). With pre-integrated rendering (the renderer's default since),
-the run's first and last generations reach 5.6 / 12.4 / 0.7 and 5.7 / 12.4 / 0.6. Measured
-over each stroke's structure, not its line, and in 400 renderings, the run's last reaches
-4.9 / 8.2 / 4.3 (the crown middle's grey band, under its yellow line, is seen and fitted);
-over the lines in 400 renderings, 3.8 / 12.2 / 1.9; over the structures in 200, 6.1 / 11.3 /
-3.6. In 800 renderings (measured on the pictures' pixels alone, so in the same 7-9 s on two
-CPU cores), the first generation reaches 3.6 / 6.9 / 3.9 and the run's last 3.5 / 6.9 / 4.5;
-with the labelling oracle as judge, the run's last 3.9 / 6.6 / 4.6 (6.1 / 6.6 / 4.5 in 400).
-Fitted alone, 1600 renderings lower the fit's own error further (worst stroke 6.1 to 5.3 on
-average) but not the crown middle's as the benchmark measures it (7.0 to 6.8): there the
-sketch's region (a band of the picture) and the labelled structure (the crown's lower half,
-its enamel dense like the top's) part.
+On the paper's tooth sketch (``benchmarks/intent_cases.py --cases tooth-sketch``, 12 seeds,
+ΔE2000 of crown top / middle / root on the labels, pre-integrated rendering), the run's last
+generation, with the metric judge:
+
+- the strokes' hints alone: 16.2 / 14.8 / 3.5 (generation 0: 23.1 / 11.3 / 7.9);
+- fitted on the strokes' lines in the lit picture, 200 renderings: 5.7 / 12.4 / 0.6;
+- on the strokes' structures in the lit picture, 400 renderings: 4.9 / 8.2 / 4.3 (the
+  crown middle's grey band under its yellow line is seen and fitted); 800: 3.5 / 6.9 / 4.5;
+- on the structures, lit and unshaded, 800 renderings of each: 3.9 / 5.8 / 5.1 (generation
+  0: 4.2 / 6.1 / 5.5); with the labelling oracle as judge 4.3 / 5.6 / 5.5 (lit only, 800:
+  3.9 / 6.6 / 4.6; 400: 6.1 / 6.6 / 4.5).
+
+Lit only, the fit's own error kept falling with more renderings (worst stroke 6.1 to 5.3 on
+average from 800 to 1600) while the crown middle on the labels stayed at 7.0-6.8: a yellow
+that looked right lit sat on enamel tinted by the red above it. Unshaded only, the labels
+read 2.6 / 3.3 / 8.7 but the fitted TFs were ghosts the lit picture barely shows (its
+strokes' errors 9-129). The fit takes 14-15 s of a sketch run's start on two CPU cores, the
+strokes' structures and the views' sample caches included (``benchmarks/sketch_fit.py``).
 """
 
 from __future__ import annotations
@@ -43,9 +48,9 @@ import numpy as np
 from intuitf.tf import Gaussian, GaussianTF
 from intuitf.tf.gaussian import HEIGHT_RANGE, WIDTH_RANGE
 
-#: CMA-ES generations and candidates per generation (800 renderings in all: measured over the
-#: strokes' structures, 200 left the tooth sketch's fit half-way on some seeds, and 800 took
-#: its first generation from 5.0 / 8.7 / 3.2 to 3.5 / 7.0 / 3.9 over 400).
+#: CMA-ES generations and candidates per generation (800 TFs measured: over the strokes'
+#: structures, 200 left the tooth sketch's fit half-way on some seeds, and 800 took its first
+#: generation from 5.0 / 8.7 / 3.2 to 3.5 / 7.0 / 3.9 over 400, measured lit).
 ITERATIONS = 80
 POPSIZE = 10
 #: Weight of the strokes' mean error beside the worst one's.
@@ -56,6 +61,11 @@ _CENTRE_SCALE = 10.0
 _STEP = 0.3
 #: The cost of a TF whose picture the strokes cannot be measured on (worse than any ΔE).
 _UNMEASURED = 1e6
+#: A region whose rays take no colour at all, in :func:`material_errors` (worse than any
+#: CIEDE2000 between two colours).
+_NO_MATERIAL = 100.0
+#: Least total opacity (summed over a region's pixels) that gives the region a colour.
+_MIN_ALPHA = 1e-3
 
 
 @dataclass(frozen=True)
@@ -109,6 +119,53 @@ def _decode(x: np.ndarray, strokes: Sequence) -> GaussianTF:
 def _colour(rgb) -> tuple[float, float, float]:
     r, g, b = (float(np.clip(v, 0.0, 1.0)) for v in rgb)
     return (r, g, b)
+
+
+def regions_on(regions: Sequence, shape: tuple[int, int]) -> list:
+    """``regions`` (:class:`~intuitf.evaluator.types.PartRegion`) with their masks resized to
+    a picture of ``shape`` (nearest neighbour), once for every picture a fit measures."""
+    from dataclasses import replace
+
+    from skimage.transform import resize
+
+    return [
+        r if np.shape(r.mask) == tuple(shape)
+        else replace(r, mask=resize(np.asarray(r.mask, np.float32), shape, order=0) > 0.5)
+        for r in regions
+    ]  # fmt: skip
+
+
+def material_errors(rgba: np.ndarray, regions: Sequence) -> np.ndarray:
+    """Each region's colour error in an unshaded picture: CIEDE2000 between the colour its rays
+    take from the TF and the region's asked colour.
+
+    ``rgba`` is a premultiplied RGBA picture rendered without shading (float, H x W x 4);
+    ``regions`` hold a ``mask`` (H x W bool: :func:`regions_on`) and an asked ``rgb`` in
+    [0, 1] each (:class:`~intuitf.evaluator.types.PartRegion`). A region's colour is its pixels' colours
+    summed and divided by their opacity: what each ray is coloured, however faint, weighted
+    by how much it shows, with no light on it. (Whether the region shows at all is the
+    shaded picture's to say.)
+    """
+    from skimage.color import deltaE_ciede2000, rgb2lab
+
+    out = []
+    for region in regions:
+        mask = np.asarray(region.mask, dtype=bool)
+        if mask.shape != rgba.shape[:2]:
+            raise ValueError(
+                f"region {region.name!r} is {mask.shape}, the picture {rgba.shape[:2]}:"
+                " resize the regions first (regions_on)"
+            )
+        px = rgba[mask]
+        alpha = float(px[:, 3].sum()) if len(px) else 0.0
+        if alpha < _MIN_ALPHA:
+            out.append(_NO_MATERIAL)
+            continue
+        seen = np.clip(px[:, :3].sum(axis=0) / alpha, 0.0, 1.0)
+        asked = np.clip(np.asarray(region.rgb, dtype=np.float64), 0.0, 1.0)
+        lab = rgb2lab(np.stack([seen, asked])[None].astype(np.float32))[0]
+        out.append(float(deltaE_ciede2000(lab[0], lab[1])))
+    return np.asarray(out, dtype=np.float64)
 
 
 def fit_sketch(

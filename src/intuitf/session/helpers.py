@@ -61,25 +61,36 @@ def _fit_sketch(intent: Intent, settings: RunSettings, volume: Volume, reading: 
 
     from intuitf.evaluator.metric import MetricJudge
     from intuitf.intent.regions import sketch_regions
-    from intuitf.intent.sketch_fit import fit_sketch
+    from intuitf.intent.sketch_fit import fit_sketch, material_errors, regions_on
     from intuitf.render import Camera, VolumeRenderer
 
-    renderer = VolumeRenderer(
-        volume,
-        size=min(int(settings.image_size), SKETCH_FIT_SIZE),
-        shading=settings.shading,
-        background=tuple(settings.background),
-        device=settings.device,
-    )
+    def view(shading: bool) -> Any:
+        return VolumeRenderer(
+            volume,
+            size=min(int(settings.image_size), SKETCH_FIT_SIZE),
+            shading=shading,
+            background=tuple(settings.background),
+            device=settings.device,
+        ).sample_cache(camera)
+
     camera = Camera.from_dict(settings.camera)
-    view = renderer.sample_cache(camera)
+    shaded, unshaded = view(settings.shading), view(False)
     judge = MetricJudge(cache_size=4)
     # Measured as the run's judge measures the strokes: over the structures they lie on.
     judged = replace(intent, part_regions=sketch_regions(intent, volume, camera))
-    fit = fit_sketch(
-        reading.strokes, lambda tf: judge.stroke_errors(view.render(tf), judged),
-        seed=settings.seed,
-    )  # fmt: skip
+    regions = regions_on(judged.part_regions, (unshaded.height, unshaded.width))
+
+    def errors(tf: GaussianTF) -> Any:
+        # Half the picture as the judge sees it, half the colour the TF gives each stroke's
+        # structure (:func:`material_errors`, unshaded): the picture alone let the headlight's
+        # highlights and what shows through stand in for the colour (the tooth's crown middle
+        # turned towards orange under a yellow that looked right lit).
+        seen = judge.stroke_errors(shaded.render(tf), judged)
+        if seen is None or len(seen) != len(regions):
+            return seen
+        return 0.5 * (seen + material_errors(unshaded.render_rgba(tf), regions))
+
+    fit = fit_sketch(reading.strokes, errors, seed=settings.seed)
     return fit if fit is not None and fit.improved else None
 
 
