@@ -141,10 +141,10 @@ def material_errors(rgba: np.ndarray, regions: Sequence) -> np.ndarray:
 
     ``rgba`` is a premultiplied RGBA picture rendered without shading (float, H x W x 4);
     ``regions`` hold a ``mask`` (H x W bool: :func:`regions_on`) and an asked ``rgb`` in
-    [0, 1] each (:class:`~intuitf.evaluator.types.PartRegion`). A region's colour is its pixels' colours
-    summed and divided by their opacity: what each ray is coloured, however faint, weighted
-    by how much it shows, with no light on it. (Whether the region shows at all is the
-    shaded picture's to say.)
+    [0, 1] each (:class:`~intuitf.evaluator.types.PartRegion`). A region's colour is its
+    pixels' colours summed and divided by their opacity: what each ray is coloured, however
+    faint, weighted by how much it shows, with no light on it. (Whether the region shows at
+    all is the lit picture's to say.)
     """
     from skimage.color import deltaE_ciede2000, rgb2lab
 

@@ -46,9 +46,10 @@ SKETCH_FIT_SIZE = 128
 
 def _fit_sketch(intent: Intent, settings: RunSettings, volume: Volume, reading: Any) -> Any:
     """A TF fitted to the sketch's strokes (:func:`intuitf.intent.sketch_fit.fit_sketch`) on
-    the judging camera's picture, measured as the offline judge measures strokes; None when
-    the intent is no sketch, nothing was read of it, or the fit did no better than the
-    strokes' hints."""
+    the judging camera's pictures, each stroke measured over its structure as the offline
+    judge measures it in the lit picture and by its colour in the unshaded one; None when the
+    intent is no sketch, nothing was read of it, or the fit did no better than the strokes'
+    hints."""
     if (
         intent.kind != "sketch"
         or not getattr(settings, "fit_sketch", True)
