@@ -203,8 +203,9 @@ def fit_sketch(
             best_x, _STEP,
             {"popsize": int(popsize), "seed": int(seed) + 1 + 1000 * restarts, "verbose": -9},
         )  # fmt: skip
+        ran = 0
         while left > 0 and not es.stop():
-            left -= 1
+            left, ran = left - 1, ran + 1
             xs = es.ask()
             costs = []
             for x in xs:
@@ -215,6 +216,8 @@ def fit_sketch(
                 if cost < best_cost:
                     best_x, best_err, best_cost = np.asarray(x), np.asarray(err), cost
             es.tell(xs, costs)
+        if ran == 0:  # a search that stops before its first step would never end
+            break
         restarts += 1
     return SketchFit(
         _decode(best_x, strokes),
