@@ -100,13 +100,13 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
-from skimage.color import deltaE_ciede2000, rgb2lab
+from skimage.color import rgb2lab
 from skimage.metrics import structural_similarity
 from skimage.transform import resize
 
 from intuitf.evaluator.metric_quality import Quality, quality
 from intuitf.evaluator.types import Aspect, Choice, Cost, Intent, Verdict, weighted_overall
-from intuitf.intent.colours import NAMED_COLOURS, named_colours
+from intuitf.intent.colours import NAMED_COLOURS, named_colours, rgb_delta_e
 from intuitf.intent.reference import outline_and_inside
 
 #: Colour names a text may use, as sRGB (0-255). Multi-word names are matched first.
@@ -271,7 +271,7 @@ def _features(image: np.ndarray) -> _Features:
 
 def _fg128(f: _Features) -> np.ndarray:
     """The foreground resized to the 128 x 128 grid of ``gray128``."""
-    return _resize_mask(f.fg, (128, 128))
+    return resize_mask(f.fg, (128, 128))
 
 
 def _layer_lightness(f: _Features, r: _Features) -> float:
@@ -311,8 +311,9 @@ def _resize_like(arr: np.ndarray, shape: tuple[int, int], order: int) -> np.ndar
     return out
 
 
-def _resize_mask(mask: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """A boolean mask on a picture of ``shape`` (nearest neighbour)."""
+def resize_mask(mask: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """A boolean mask on a picture of ``shape`` (nearest neighbour): a region or a stroke
+    drawn on one picture, measured on another."""
     return _resize_like(np.asarray(mask).astype(np.float32), shape, order=0) > 0.5
 
 
@@ -585,7 +586,7 @@ class MetricJudge:
         shape = f.lab.shape[:2]
         shown = self._base_shown(intent, shape) if intent.base is not None else np.ones(shape, bool)
         return np.array(
-            [_region_delta_e(f, _resize_mask(r.mask, shape), shown, r.rgb)
+            [_region_delta_e(f, resize_mask(r.mask, shape), shown, r.rgb)
              for r in intent.part_regions],
             dtype=np.float64,
         )  # fmt: skip
@@ -653,7 +654,7 @@ class MetricJudge:
 
     def _base_shown(self, intent: Intent, shape: tuple[int, int]) -> np.ndarray:
         """Where the base picture shows something, on a picture of ``shape``."""
-        return _resize_mask(self.features(intent.base).fg, shape)  # type: ignore[arg-type]
+        return resize_mask(self.features(intent.base).fg, shape)  # type: ignore[arg-type]
 
     def _base_lab(self, intent: Intent, shape: tuple[int, int]) -> np.ndarray:
         base = self.features(intent.base).lab  # type: ignore[arg-type]
@@ -789,7 +790,7 @@ def _region_colour(f: _Features, region) -> float:
     over a black background: what tells a brown pot from a silver one is the colour, not how
     lit it is (as :meth:`_Features.layers`).
     """
-    here = _resize_mask(region.mask, f.fg.shape) & f.fg
+    here = resize_mask(region.mask, f.fg.shape) & f.fg
     if int(here.sum()) < _REGION_MIN_PIXELS:
         return 0.0
     rgb = f.rgb[here].astype(np.float32) / 255.0
@@ -868,7 +869,7 @@ def _nearness(pix: np.ndarray, target: np.ndarray) -> np.ndarray:
 def _edit_region(intent: Intent, shape: tuple[int, int]) -> np.ndarray | None:
     """Where an edit should happen: the selected features' pixels, else the sketch strokes."""
     if intent.selection_mask is not None:
-        return _resize_mask(intent.selection_mask, shape)
+        return resize_mask(intent.selection_mask, shape)
     mask, _ = _strokes(intent, shape)
     return mask
 
@@ -991,9 +992,7 @@ def _region_delta_e(f: _Pixels, here: np.ndarray, shown: np.ndarray, rgb) -> flo
     if weight < 1e-3:
         return _ABSENT_DELTA_E
     mean = np.clip(pix.sum(axis=0) / weight * max(float(asked.max()), 1e-3), 0.0, 1.0)
-    seen, target = rgb2lab(np.stack([mean, asked])[None])[0]
-    de = float(deltaE_ciede2000(seen, target))
-    return (1.0 - gone) * de + gone * _ABSENT_DELTA_E
+    return (1.0 - gone) * rgb_delta_e(mean, asked) + gone * _ABSENT_DELTA_E
 
 
 def _stroke_ids(intent: Intent, shape: tuple[int, int]) -> np.ndarray:

@@ -78,3 +78,13 @@ def colour_word(rgb) -> str:
     names = [n for n in NAMED_COLOURS if n not in NOT_NAMES]
     labs = rgb2lab(np.array([[NAMED_COLOURS[n] for n in names]], np.float64) / 255.0)[0]
     return names[int(np.argmin(deltaE_ciede2000(labs, lab[None])))]
+
+
+def rgb_delta_e(a, b) -> float:
+    """CIEDE2000 between two sRGB colours (three values in [0, 1] each), as a person tells
+    them apart."""
+    import numpy as np
+    from skimage.color import deltaE_ciede2000, rgb2lab
+
+    lab = rgb2lab(np.stack([np.asarray(a, np.float32), np.asarray(b, np.float32)])[None])[0]
+    return float(deltaE_ciede2000(lab[0], lab[1]))

@@ -126,13 +126,9 @@ def regions_on(regions: Sequence, shape: tuple[int, int]) -> list:
     a picture of ``shape`` (nearest neighbour), once for every picture a fit measures."""
     from dataclasses import replace
 
-    from skimage.transform import resize
+    from intuitf.evaluator.metric import resize_mask
 
-    return [
-        r if np.shape(r.mask) == tuple(shape)
-        else replace(r, mask=resize(np.asarray(r.mask, np.float32), shape, order=0) > 0.5)
-        for r in regions
-    ]  # fmt: skip
+    return [replace(r, mask=resize_mask(r.mask, shape)) for r in regions]
 
 
 def material_errors(rgba: np.ndarray, regions: Sequence) -> np.ndarray:
@@ -146,7 +142,7 @@ def material_errors(rgba: np.ndarray, regions: Sequence) -> np.ndarray:
     faint, weighted by how much it shows, with no light on it. (Whether the region shows at
     all is the lit picture's to say.)
     """
-    from skimage.color import deltaE_ciede2000, rgb2lab
+    from intuitf.intent.colours import rgb_delta_e
 
     out = []
     for region in regions:
@@ -162,9 +158,7 @@ def material_errors(rgba: np.ndarray, regions: Sequence) -> np.ndarray:
             out.append(_NO_MATERIAL)
             continue
         seen = np.clip(px[:, :3].sum(axis=0) / alpha, 0.0, 1.0)
-        asked = np.clip(np.asarray(region.rgb, dtype=np.float64), 0.0, 1.0)
-        lab = rgb2lab(np.stack([seen, asked])[None].astype(np.float32))[0]
-        out.append(float(deltaE_ciede2000(lab[0], lab[1])))
+        out.append(rgb_delta_e(seen, np.clip(np.asarray(region.rgb), 0.0, 1.0)))
     return np.asarray(out, dtype=np.float64)
 
 
