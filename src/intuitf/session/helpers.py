@@ -75,7 +75,8 @@ def _fit_sketch(intent: Intent, settings: RunSettings, volume: Volume, reading: 
         ).sample_cache(camera)
 
     camera = Camera.from_dict(settings.camera)
-    shaded, unshaded = view(settings.shading), view(False)
+    unshaded = view(False)
+    shaded = view(True) if settings.shading else unshaded  # one view when the run is unlit
     judge = MetricJudge(cache_size=4)
     # Measured as the run's judge measures the strokes: over the structures they lie on.
     judged = replace(intent, part_regions=sketch_regions(intent, volume, camera))
