@@ -146,6 +146,29 @@ def test_initial_tfs_included_as_is():
     assert any(c.parents == (first.id,) for c in ex.ask()[1:])
 
 
+def test_a_given_tf_plays_a_second_tournament_before_the_ranking_drops_it():
+    # One noisy tournament is little evidence against a TF the run was given (a sketch's
+    # fitted TF): ranked last once it stays, unchanged and with its id; ranked last again it
+    # goes. A bred candidate ranked as low is gone at once.
+    tf = GaussianTF((Gaussian(0.4, 0.05, 0.5, (0.9, 0.1, 0.1)),), name="fitted")
+    ex = GeneticExplorer(population=8, n_gaussians=1, generations=6, seed=0, initial=[tf])
+    given = ex.ask()[0]
+    assert given.origin == "initial"
+
+    def last(ids: list[str], cid: str) -> list[str]:
+        return [i for i in ids if i != cid] + [cid]
+
+    ex.tell(last([c.id for c in ex.ask()], given.id))
+    second = ex.ask()
+    assert given.id in [c.id for c in second] and given in second
+    assert len(second) == 8
+    bred = next(c for c in second if c.origin not in ("initial", "elite") and c.generation == 1)
+    ranking = [c.id for c in second if c.id not in (given.id, bred.id)] + [bred.id, given.id]
+    ex.tell(ranking)
+    third = [c.id for c in ex.ask()]
+    assert given.id not in third and bred.id not in third
+
+
 def test_refine_freezes_all_but_selected_in_every_individual(target_tf):
     lut = target_tf.lut(64)
     ex = GeneticExplorer(population=12, n_gaussians=4, generations=5, seed=4)

@@ -25,9 +25,10 @@ class GeneticExplorer(BaseExplorer):
     8
 
     Each ``tell`` keeps the top ``elite_share(progress)`` of the ranking unchanged (same
-    ids, at least one); makes ``local_share`` of the other places mutated copies of the top
-    of the ranking (the elites, or the best four if there are fewer), which is where an
-    improvement is most likely; draws the remaining parents by roulette wheel over fitness
+    ids, at least one), and a TF the run was given (``initial``) through its first
+    tournament wherever it ranked; makes ``local_share`` of the other places mutated copies
+    of the top of the ranking (the elites, or the best four if there are fewer), which is
+    where an improvement is most likely; draws the remaining parents by roulette wheel over fitness
     (with replacement), pairs them, crosses each pair with the stage's crossover rate,
     mutates every child, and replaces near-duplicates by fresh variation. The population
     size never changes. See :class:`~intuitf.explorer.stages.StagePreset` for the rates.
@@ -42,13 +43,21 @@ class GeneticExplorer(BaseExplorer):
         n = self.population_size
         n_elite = elite_count(preset.elite_share(progress), min(n, len(ranked)))
         nxt: list[Candidate] = list(ranked[:n_elite])
+        # A TF the run was given (the user's own, or the one fitted to a sketch's strokes)
+        # plays a second tournament before the ranking may drop it: one tournament of a noisy
+        # judge is little evidence against it. (With the labelling oracle, 10 % of its
+        # verdicts wrong, the tooth sketch's fitted TF, the best candidate on the labels,
+        # lost two of its six first matches in one seed of 12, ranked sixth and was gone.)
+        told = self._generation - 1
+        nxt += [c for c in ranked[n_elite:] if c.origin == "initial" and c.generation == told]
+        nxt = nxt[:n]
         params = preset.mutation_params(progress, self.palette, self.hints)
         cx_rate = preset.crossover_rate.at(progress)
         # Mutated copies of the top of the ranking (best first, round robin). Near a good TF
         # most children of roulette-drawn parents are worse than the best; children of the
         # best are the likeliest improvements (measured: the engine recovery went from
         # 0.90 to 0.92 SSIM with a noise-free judge).
-        n_local = min(n - n_elite, round(preset.local_share.at(progress) * (n - n_elite)))
+        n_local = min(n - len(nxt), round(preset.local_share.at(progress) * (n - n_elite)))
         for k in range(n_local):
             parent = ranked[k % max(n_elite, 4)]
             tf = _canonical(mutate(parent.tf, self._rng, params, self.bounds))

@@ -30,7 +30,9 @@ generation, with the metric judge:
   0: 4.2 / 6.1 / 5.5); with the labelling oracle as judge 4.3 / 5.6 / 5.5 (lit only, 800:
   3.9 / 6.6 / 4.6; 400: 6.1 / 6.6 / 4.5);
 - the same with half the first step and 1,300 renderings of each: 3.6 / 5.1 / 4.7
-  (generation 0: 3.7 / 5.2 / 4.7), and with the oracle 3.8 / 4.4 / 5.2.
+  (generation 0: 3.7 / 5.2 / 4.7), and with the oracle 3.8 / 4.4 / 5.2; with the fitted TF
+  kept through a second tournament (:class:`~intuitf.explorer.ga.GeneticExplorer`), 3.5 /
+  5.0 / 4.7, and with the oracle 3.7 / 4.7 / 4.8.
 
 Lit only, the fit's own error kept falling with more renderings (worst stroke 6.1 to 5.3 on
 average from 800 to 1600) while the crown middle on the labels stayed at 7.0-6.8: a yellow
