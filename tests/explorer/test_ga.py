@@ -169,6 +169,21 @@ def test_a_given_tf_plays_a_second_tournament_before_the_ranking_drops_it():
     assert given.id not in third and bred.id not in third
 
 
+def test_given_tfs_kept_for_a_second_tournament_take_at_most_a_quarter_of_the_places():
+    # Branching from many TFs: the best ranked of them stay, the population still breeds.
+    tfs = [
+        GaussianTF((Gaussian(0.1 + 0.12 * k, 0.03, 0.5, (0.9, 0.1, 0.1)),), name=f"given {k}")
+        for k in range(6)
+    ]
+    ex = GeneticExplorer(population=8, n_gaussians=1, generations=6, seed=0, initial=tfs)
+    first = ex.ask()
+    given = [c.id for c in first if c.origin == "initial"]
+    assert len(given) == 6
+    ex.tell([c.id for c in first if c.id not in given] + given)
+    kept = [c.id for c in ex.ask() if c.id in given]
+    assert kept == given[:2]
+
+
 def test_refine_freezes_all_but_selected_in_every_individual(target_tf):
     lut = target_tf.lut(64)
     ex = GeneticExplorer(population=12, n_gaussians=4, generations=5, seed=4)

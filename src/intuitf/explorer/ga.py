@@ -25,11 +25,11 @@ class GeneticExplorer(BaseExplorer):
     8
 
     Each ``tell`` keeps the top ``elite_share(progress)`` of the ranking unchanged (same
-    ids, at least one), and a TF the run was given (``initial``) through its first
-    tournament wherever it ranked; makes ``local_share`` of the other places mutated copies
-    of the top of the ranking (the elites, or the best four if there are fewer), which is
-    where an improvement is most likely; draws the remaining parents by roulette wheel over fitness
-    (with replacement), pairs them, crosses each pair with the stage's crossover rate,
+    ids, at least one), and the TFs the run was given (``initial``, up to a quarter of the
+    places) through their first tournament wherever they ranked; makes ``local_share`` of
+    the other places mutated copies of the top of the ranking (the elites, or the best four
+    if there are fewer), which is where an improvement is most likely; draws the remaining
+    parents by roulette wheel over fitness (with replacement), pairs them, crosses each pair with the stage's crossover rate,
     mutates every child, and replaces near-duplicates by fresh variation. The population
     size never changes. See :class:`~intuitf.explorer.stages.StagePreset` for the rates.
     """
@@ -48,9 +48,11 @@ class GeneticExplorer(BaseExplorer):
         # judge is little evidence against it. (With the labelling oracle, 10 % of its
         # verdicts wrong, the tooth sketch's fitted TF, the best candidate on the labels,
         # lost two of its six first matches in one seed of 12, ranked sixth and was gone.)
+        # At most a quarter of the places, the best ranked first: a branch from many TFs
+        # still breeds.
         told = self._generation - 1
-        nxt += [c for c in ranked[n_elite:] if c.origin == "initial" and c.generation == told]
-        nxt = nxt[:n]
+        given = [c for c in ranked[n_elite:] if c.origin == "initial" and c.generation == told]
+        nxt += given[: min(n - n_elite, max(1, n // 4))]
         params = preset.mutation_params(progress, self.palette, self.hints)
         cx_rate = preset.crossover_rate.at(progress)
         # Mutated copies of the top of the ranking (best first, round robin). Near a good TF
