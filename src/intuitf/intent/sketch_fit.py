@@ -54,9 +54,9 @@ from intuitf.tf.gaussian import HEIGHT_RANGE, WIDTH_RANGE
 
 #: CMA-ES generations and candidates per generation (1,300 TFs). On the tooth sketch the
 #: fit's own error and the structures' colour on the labels fall together as the search goes
-#: further (12 seeds, fitted alone, step 0.15): 800 TFs, worst stroke plus 0.3 of the mean
-#: 7.8, labels 3.6 / 5.4 / 5.0; 1,300 TFs, 7.2 and 3.3 / 5.2 / 4.9, in 17-25 s instead of
-#: 13-15 s.
+#: further (12 seeds, fitted alone): 800 TFs (first step 0.12), worst stroke plus 0.3 of the
+#: mean 7.8, labels 3.6 / 5.4 / 5.0; 1,300 TFs (0.15), 7.2 and 3.3 / 5.2 / 4.9, in 17-25 s
+#: instead of 13-15 s.
 ITERATIONS = 130
 POPSIZE = 10
 #: Weight of the strokes' mean error beside the worst one's.
